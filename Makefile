@@ -1,0 +1,39 @@
+# Two commands do all setup on a fresh machine:
+#   make demo   create .venv if missing, install torch (CPU) then margin_rl, run the main job
+#   make test   same setup, then ruff and the full test suite
+# torch is installed first and explicitly: on these machines `torch==2.13.0` is a local CPU wheel,
+# while any other torch request (e.g. pulled in by a dependency) downloads GBs of CUDA packages.
+
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+TORCH_SPEC ?= torch==2.13.0
+STAMP := $(VENV)/.margin_rl-installed
+export PIP_NO_INPUT := 1
+export PIP_DISABLE_PIP_VERSION_CHECK := 1
+export GIT_PYTHON_REFRESH := quiet
+
+.PHONY: install demo test lint clean
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+
+$(STAMP): $(PY) pyproject.toml
+	$(PY) -m pip install -q "$(TORCH_SPEC)"
+	$(PY) -m pip install -q -e ".[dev]"
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: install
+	$(PY) -m margin_rl
+
+lint: install
+	$(PY) -m ruff check .
+
+test: install lint
+	$(PY) -m pytest
+
+clean:
+	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache .hypothesis

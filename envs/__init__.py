@@ -1,0 +1,1 @@
+"""Gymnasium environments of margin_rl, installed as ``margin_rl.envs``."""

@@ -1,0 +1,1 @@
+"""Actuated SLIP hopper, its learned failure-margin function and footstep planner (seed 001)."""

@@ -1,0 +1,1 @@
+"""Stability layer: analytic feasible region and margin, learned margin (robot-agnostic core)."""

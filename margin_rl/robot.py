@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import importlib.resources
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -116,6 +117,15 @@ class LegGeometry:
 
 
 @dataclass(frozen=True)
+class RigidBodyDynamics:
+    """Whole-body quantities of :meth:`Robot.rigid_body_dynamics` (frozen joints, zero velocities)."""
+
+    bias_torques: np.ndarray  # (4, 3) delta_i [N m]
+    ang_momentum_rate: np.ndarray  # (3,) rate of angular momentum about the CoM [N m]
+    com: np.ndarray  # (3,) CoM relative to the base origin [m]
+
+
+@dataclass(frozen=True)
 class IKSolution:
     """Batched leg inverse kinematics result.
 
@@ -178,9 +188,36 @@ def leg_inverse_kinematics(geometry: LegGeometry, foot_pos: np.ndarray) -> tuple
         target is unreachable when it is outside the workspace (distance conditions) or a solution
         angle is outside the joint limits.
     """
-    p = np.asarray(foot_pos, dtype=float)
-    r = p - geometry.haa_origin
-    lat = geometry.lateral_offset
+    return _ik(
+        geometry.haa_origin,
+        geometry.hfe_offset,
+        geometry.kfe_offset,
+        geometry.foot_offset,
+        geometry.lower,
+        geometry.upper,
+        np.asarray(geometry.knee_sign),
+        np.asarray(foot_pos, dtype=float),
+    )
+
+
+def _ik(
+    haa: np.ndarray,
+    hfe: np.ndarray,
+    kfe: np.ndarray,
+    foot: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    knee_sign: np.ndarray,
+    p: np.ndarray,
+    clip: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised IK core (see :func:`leg_inverse_kinematics`); geometry arrays broadcast against p.
+
+    With ``clip`` an unreachable leg gets the nearest boundary solution (acos arguments and joint
+    angles clipped) instead of NaN; ``reachable`` is the same either way.
+    """
+    r = p - haa
+    lat = hfe[..., 1] + kfe[..., 1] + foot[..., 1]
     rho = np.hypot(r[..., 1], r[..., 2])
     with np.errstate(invalid="ignore", divide="ignore"):
         cos_haa = lat / rho
@@ -188,15 +225,15 @@ def leg_inverse_kinematics(geometry: LegGeometry, foot_pos: np.ndarray) -> tuple
         q1 = _wrap_angle(np.arctan2(r[..., 2], r[..., 1]) + np.arccos(np.clip(cos_haa, -1.0, 1.0)))
         # Target in the HIP frame (undo the HAA rotation), relative to the HFE joint, in the x-z plane.
         c1, s1 = np.cos(q1), np.sin(q1)
-        tx = r[..., 0] - geometry.hfe_offset[0]
-        tz = -s1 * r[..., 1] + c1 * r[..., 2] - geometry.hfe_offset[2]
-        ax, az = geometry.kfe_offset[0], geometry.kfe_offset[2]
-        bx, bz = geometry.foot_offset[0], geometry.foot_offset[2]
+        tx = r[..., 0] - hfe[..., 0]
+        tz = -s1 * r[..., 1] + c1 * r[..., 2] - hfe[..., 2]
+        ax, az = kfe[..., 0], kfe[..., 2]
+        bx, bz = foot[..., 0], foot[..., 2]
         norm_a, norm_b = np.hypot(ax, az), np.hypot(bx, bz)
         psi = np.arctan2(ax * bz - az * bx, ax * bx + az * bz)
         cos_knee = (tx * tx + tz * tz - norm_a**2 - norm_b**2) / (2.0 * norm_a * norm_b)
         ok &= np.abs(cos_knee) <= 1.0
-        q3 = _wrap_angle(psi + geometry.knee_sign * np.arccos(np.clip(cos_knee, -1.0, 1.0)))
+        q3 = _wrap_angle(psi + knee_sign * np.arccos(np.clip(cos_knee, -1.0, 1.0)))
         # Ry(q) acts on (x, z) as a rotation by -q, so q2 = angle(c) - angle(t).
         c3, s3 = np.cos(q3), np.sin(q3)
         cx = ax + c3 * bx + s3 * bz
@@ -204,9 +241,9 @@ def leg_inverse_kinematics(geometry: LegGeometry, foot_pos: np.ndarray) -> tuple
         q2 = _wrap_angle(np.arctan2(cz, cx) - np.arctan2(tz, tx))
     q = np.stack([q1, q2, q3], axis=-1)
     tol = 1e-9
-    ok &= np.all((q >= geometry.lower - tol) & (q <= geometry.upper + tol), axis=-1)
+    ok &= np.all((q >= lower - tol) & (q <= upper + tol), axis=-1)
     ok &= np.all(np.isfinite(p), axis=-1)
-    q = np.where(ok[..., None], q, np.nan)
+    q = np.clip(q, lower, upper) if clip else np.where(ok[..., None], q, np.nan)
     return q, ok
 
 
@@ -279,22 +316,125 @@ class Robot:
             [leg_forward_kinematics(g, q[..., 3 * i : 3 * i + 3]) for i, g in enumerate(self.legs)], axis=-2
         )
 
-    def inverse_kinematics(self, foot_pos: np.ndarray) -> IKSolution:
+    def com_positions(self, joint_pos: np.ndarray) -> np.ndarray:
+        """Whole-body CoM in the base frame, closed form and batched (for sampling millions of states).
+
+        com = (m_base c_base + sum_b m_b (o_b + R_b c_b)) / M over the HIP, THIGH and SHANK bodies, with
+        the body origins o_b and orientations R_b of the leg chain (see :class:`LegGeometry`) and the
+        body masses m_b and inertial positions c_b of the MJCF. Matches Pinocchio's ``centerOfMass``.
+
+        Args:
+            joint_pos: (..., 12) joint angles [rad].
+
+        Returns:
+            (..., 3) CoM relative to the base origin [m].
+        """
+        q = self._check_joint_pos(joint_pos)
+        model = self.mj_model
+        base = model.body("base").id
+        total = model.body_mass[base] * model.body_ipos[base] + np.zeros((*q.shape[:-1], 3))
+        for i, g in enumerate(self.legs):
+            r_hip = _rot_x(q[..., 3 * i])
+            r_thigh = r_hip @ _rot_y(q[..., 3 * i + 1])
+            r_shank = r_thigh @ _rot_y(q[..., 3 * i + 2])
+            o_hip = g.haa_origin
+            o_thigh = o_hip + r_hip @ g.hfe_offset
+            o_shank = o_thigh + r_thigh @ g.kfe_offset
+            for suffix, o, R in (("HIP", o_hip, r_hip), ("THIGH", o_thigh, r_thigh), ("SHANK", o_shank, r_shank)):
+                b = model.body(f"{g.leg}_{suffix}").id
+                total = total + model.body_mass[b] * (o + R @ model.body_ipos[b])
+        return total / self.total_mass
+
+    def inverse_kinematics(self, foot_pos: np.ndarray, clip: bool = False) -> IKSolution:
         """Batched analytic IK of all four legs, with an explicit per-leg reachability status.
 
         Args:
             foot_pos: (..., 4, 3) foot-sphere centres in the base frame [m].
+            clip: give unreachable legs their nearest boundary configuration instead of NaN (for
+                iterative schemes; ``reachable`` still reports the truth).
 
         Returns:
-            :class:`IKSolution`; unreachable legs have NaN angles and ``reachable`` False.
+            :class:`IKSolution`; unreachable legs have NaN angles (unless ``clip``) and ``reachable`` False.
         """
         p = np.asarray(foot_pos, dtype=float)
         if p.shape[-2:] != (len(self.legs), 3):
             raise ValueError(f"foot_pos must have shape (..., {len(self.legs)}, 3), got {p.shape}")
-        sols = [leg_inverse_kinematics(g, p[..., i, :]) for i, g in enumerate(self.legs)]
-        joint_pos = np.concatenate([q for q, _ in sols], axis=-1)
-        reachable = np.stack([ok for _, ok in sols], axis=-1)
-        return IKSolution(joint_pos=joint_pos, reachable=reachable)
+        q, reachable = _ik(*self._stacked_legs, p, clip=clip)
+        return IKSolution(joint_pos=q.reshape(*q.shape[:-2], 3 * len(self.legs)), reachable=reachable)
+
+    @functools.cached_property
+    def _stacked_legs(self) -> tuple[np.ndarray, ...]:
+        """Leg constants stacked along a leading leg axis, for the vectorised IK."""
+        fields = ("haa_origin", "hfe_offset", "kfe_offset", "foot_offset", "lower", "upper")
+        arrays = [np.stack([getattr(g, f) for g in self.legs]) for f in fields]
+        return (*arrays, np.array([g.knee_sign for g in self.legs]))
+
+    def inverse_kinematics_com_relative(
+        self, feet_rel_com: np.ndarray, iterations: int = 10, tol: float = 3e-5
+    ) -> tuple[IKSolution, np.ndarray]:
+        """IK for feet given relative to the whole-body CoM (in base axes), as lambda describes them.
+
+        The kinematics need feet relative to the base origin, p_B = p_rel + c_B(q), and the CoM offset
+        c_B depends on the joint angles q, so this solves the fixed point c_B = F(c_B) = CoM(IK(p_rel + c_B))
+        from the standing pose's CoM with Newton steps whose Jacobian is frozen at the standing pose
+        (the map is smooth and nearly linear: the legs move the CoM by 10-20 % of their own
+        displacement; measured contraction ~0.07 per step, 3-4 iterations to 3e-5 m). An
+        intermediate iterate with a foot out of reach uses that leg's nearest boundary configuration
+        (clipped IK) so the map stays continuous; only the final configuration is judged.
+
+        Args:
+            feet_rel_com: (..., 4, 3) foot-sphere centres minus the CoM, in base axes [m].
+            iterations: maximum fixed-point iterations.
+            tol: stop when the fixed-point residual |F(c) - c| is below this [m] (max over the batch).
+
+        Returns:
+            ``(solution, com)``: the IK solution at the converged CoM and the CoM offsets (..., 3) [m].
+        """
+        p = np.asarray(feet_rel_com, dtype=float)
+        single = p.ndim == 2
+        newton, sensitivity, offset = self._com_fixed_point_newton
+        # First-order initial guess: CoM linear in the feet positions about the standing pose,
+        # c0 = (I - sum_i G_i)^-1 (c_s + sum_i G_i (p_i - f_i,s)), so the first residual is second order.
+        com = (offset + np.einsum("fij,...fj->...i", sensitivity, p)) @ newton.T
+        if single:
+            com = np.asarray(com)
+        for _ in range(iterations):
+            solution = self.inverse_kinematics(p + com[..., None, :], clip=True)
+            # Pinocchio is faster for one state, the closed form for batches; both agree to 1e-16.
+            q = solution.joint_pos
+            residual = (self.com_position(q) if single else self.com_positions(q)) - com
+            if residual.size == 0 or float(np.max(np.abs(residual))) < tol:
+                # Converged: this iterate's configuration is within tol of the fixed point.
+                return IKSolution(
+                    np.where(np.repeat(solution.reachable, 3, axis=-1), q, np.nan), solution.reachable
+                ), com
+            # Newton step on c = F(c) with the map's Jacobian frozen at the standing pose:
+            # c <- c + (I - dF/dc)^-1 (F(c) - c), instead of the linear rate of c <- F(c).
+            com = com + residual @ newton.T
+        return self.inverse_kinematics(p + com[..., None, :]), com
+
+    @functools.cached_property
+    def _com_fixed_point_newton(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Linearisation of the CoM in the feet positions at the standing pose (central differences).
+
+        Returns ``((I - G)^-1, G_i, c_s - sum_i G_i f_i,s)`` with G_i = dCoM/d(foot i) (3 x 3 each),
+        G = sum_i G_i = dF/dc of the fixed-point map, c_s and f_i,s the standing CoM and feet.
+        """
+        q0 = self.standing_joint_pos
+        feet = self.foot_positions(q0)
+        eps = 1e-4
+        sensitivity = np.zeros((len(self.legs), 3, 3))
+        for i in range(len(self.legs)):
+            for j in range(3):
+                plus, minus = feet.copy(), feet.copy()
+                plus[i, j] += eps
+                minus[i, j] -= eps
+                com_plus = self.com_position(self.inverse_kinematics(plus).joint_pos)
+                com_minus = self.com_position(self.inverse_kinematics(minus).joint_pos)
+                sensitivity[i][:, j] = (com_plus - com_minus) / (2 * eps)
+        jac = sensitivity.sum(axis=0)
+        offset = self.com_position(q0) - np.einsum("fij,fj->i", sensitivity, feet)
+        return np.linalg.inv(np.eye(3) - jac), sensitivity, offset
 
     def leg_ik(self, leg: str, foot_pos: np.ndarray) -> np.ndarray:
         """IK of one leg for one target; raises :class:`UnreachableFootError` if it cannot be reached.
@@ -366,31 +506,55 @@ class Robot:
 
         delta_i = M_{b,i}^T nu_dot_b + g_i(q): the joint torques that hold leg i's own weight and inertia
         while the base accelerates, so that the actuator torques under a contact force f_i are
-        tau_i = delta_i - J_i^T f_i. Computed with Pinocchio's RNEA with v = 0 and q_ddot = 0.
-
-        Args:
-            joint_pos: (12,) joint angles [rad].
-            base_rotation: (3, 3) base orientation in a gravity-aligned frame (z up); identity if omitted.
-            com_acc: (3,) CoM linear acceleration in that frame [m/s^2]; zero if omitted. The base-origin
-                acceleration is recovered exactly as com_acc - base_ang_acc x (c - base origin), since
-                the legs do not move relative to the base.
-            base_ang_acc: (3,) base angular acceleration in that frame [rad/s^2]; zero if omitted.
+        tau_i = delta_i - J_i^T f_i. See :meth:`rigid_body_dynamics` for the arguments.
 
         Returns:
             (4, 3) bias torques [N m], leg order :attr:`leg_names`.
         """
+        return self.rigid_body_dynamics(joint_pos, base_rotation, com_acc, base_ang_acc).bias_torques
+
+    def rigid_body_dynamics(
+        self,
+        joint_pos: np.ndarray,
+        base_rotation: np.ndarray | None = None,
+        com_acc: np.ndarray | None = None,
+        base_ang_acc: np.ndarray | None = None,
+    ) -> RigidBodyDynamics:
+        """Bias torques and centroidal angular-momentum rate with frozen joints and zero velocities.
+
+        The whole robot moves as one rigid body (v = 0, q_ddot = 0) with the given CoM and base
+        accelerations; Pinocchio's RNEA gives the joint torques delta_i = M_{b,i}^T nu_dot_b + g_i(q),
+        and its centroidal dynamics the rate of angular momentum about the CoM, L_dot = I_c(q) w_dot.
+
+        Args:
+            joint_pos: (12,) joint angles [rad].
+            base_rotation: (3, 3) base orientation in a gravity-aligned frame W (z up); identity if omitted.
+            com_acc: (3,) CoM linear acceleration in W [m/s^2]; zero if omitted. The base-origin
+                acceleration is recovered exactly as com_acc - base_ang_acc x (c - base origin), since
+                the legs do not move relative to the base.
+            base_ang_acc: (3,) base angular acceleration in W [rad/s^2]; zero if omitted.
+
+        Returns:
+            :class:`RigidBodyDynamics` with quantities expressed in W.
+        """
         R = np.eye(3) if base_rotation is None else np.asarray(base_rotation, dtype=float)
         c_ddot = np.zeros(3) if com_acc is None else np.asarray(com_acc, dtype=float)
         w_dot = np.zeros(3) if base_ang_acc is None else np.asarray(base_ang_acc, dtype=float)
+        model, data = self.pin_model, self._pin_data
         q = self.pin_configuration(joint_pos, base_quat_wxyz=_matrix_to_quat_wxyz(R))
-        com = pin.centerOfMass(self.pin_model, self._pin_data, q)  # base origin at 0, world-aligned
-        base_acc = c_ddot - np.cross(w_dot, com)
-        a = np.zeros(self.pin_model.nv)
+        v = np.zeros(model.nv)
+        com = np.array(pin.centerOfMass(model, data, q))  # base origin at 0, axes of W
+        a = np.zeros(model.nv)
         # Pinocchio's free-flyer acceleration is expressed in the base frame.
-        a[0:3] = R.T @ base_acc
+        a[0:3] = R.T @ (c_ddot - np.cross(w_dot, com))
         a[3:6] = R.T @ w_dot
-        tau = pin.rnea(self.pin_model, self._pin_data, q, np.zeros(self.pin_model.nv), a)
-        return np.stack([tau[list(v_idx)] for v_idx in self._pin_leg_v_idx])
+        tau = pin.rnea(model, data, q, v, a)
+        dhg = pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
+        return RigidBodyDynamics(
+            bias_torques=np.stack([tau[list(v_idx)] for v_idx in self._pin_leg_v_idx]),
+            ang_momentum_rate=np.array(dhg.angular),
+            com=com,
+        )
 
     def com_position(self, joint_pos: np.ndarray) -> np.ndarray:
         """Whole-body CoM in the base frame [m] (Pinocchio)."""

@@ -1,0 +1,130 @@
+"""Benchmark of :func:`margin_rl.stability.region.feasible_region`.
+
+Times whole calls (validation, problem set-up, all conic programs and the polygon clean-up) on
+synthetic quadruped states from ``tests/stability/cases.py``: random foot placements, tilted
+normals, accelerations and an external wrench, with 4, 3 and 2 (trot diagonal) contacts, for the
+exact friction cone and an 8-face pyramid.  Prints a Markdown table of the median time per call,
+the conic programs (LPs) per call and the median time per program.
+
+Usage::
+
+    python benchmarks/bench_feasible_region.py [--cases 30] [--repeats 3] [--tol T] [--rebuild]
+
+``--rebuild`` adds rows where a new Clarabel solver is built for every direction instead of
+updating only the cost vector of one solver (the default strategy), to show what the update
+saves.  Timings are wall-clock on whatever else the machine is running: run it on a quiet one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import clarabel
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from margin_rl.stability import region as fr  # noqa: E402
+from tests.stability import cases  # noqa: E402
+
+STANCES: dict[int, list[tuple[bool, bool, bool, bool]]] = {
+    4: [(True, True, True, True)],
+    3: [(False, True, True, True), (True, False, True, True), (True, True, False, True), (True, True, True, False)],
+    2: [(True, False, False, True), (False, True, True, False)],
+}
+FRICTIONS: list[Any] = ["cone", ("pyramid", 8)]
+
+
+class _RebuildOracle(fr._SupportOracle):
+    """Builds a fresh solver for every direction (the alternative to ``solver.update(q=...)``)."""
+
+    def __call__(self, ax: float, ay: float) -> tuple[int, float, float]:
+        prob = self._prob
+        q = np.zeros(prob.n_var)
+        q[0], q[1] = -ax, -ay
+        solver = clarabel.DefaultSolver(fr._zero_p(prob.n_var), q, prob.A, prob.b, prob.cones, fr._FAST_SETTINGS)
+        return self._solve(solver, ax, ay)
+
+
+def make_cases(n_contacts: int, n_cases: int, seed: int) -> list[dict[str, Any]]:
+    rng = np.random.default_rng(seed + n_contacts)
+    stances = STANCES[n_contacts]
+    return [cases.random_quadruped_case(rng, stances[i % len(stances)]) for i in range(n_cases)]
+
+
+def run(kws: list[dict[str, Any]], friction: Any, repeats: int, tol: float, max_lps: int) -> dict[str, float]:
+    times, lps, per_lp = [], [], []
+    empty = 0
+    for kw in kws:
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            region = fr.feasible_region(**kw, friction=friction, tol=tol, max_lps=max_lps)
+            dt = time.perf_counter() - t0
+            times.append(dt)
+            lps.append(region.n_lps)
+            per_lp.append(dt / max(region.n_lps, 1))
+        empty += region.status == "empty"
+    t = np.array(times) * 1e3
+    return {
+        "median_ms": float(np.median(t)),
+        "p90_ms": float(np.percentile(t, 90)),
+        "mean_lps": float(np.mean(lps)),
+        "max_lps": float(np.max(lps)),
+        "us_per_lp": float(np.median(per_lp) * 1e6),
+        "empty_pct": 100.0 * empty / len(kws),
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", type=int, default=30, help="random states per contact count")
+    ap.add_argument("--repeats", type=int, default=3, help="calls per state")
+    ap.add_argument("--tol", type=float, default=fr.DEFAULT_TOL, help="area tolerance [m^2]")
+    ap.add_argument("--max-lps", type=int, default=fr.DEFAULT_MAX_LPS)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--rebuild", action="store_true", help="also time rebuilding the solver per direction")
+    args = ap.parse_args(argv)
+
+    # Warm-up: imports, BLAS/Clarabel first-call costs.
+    warm = make_cases(4, 2, 999)
+    run(warm, "cone", 2, args.tol, args.max_lps)
+
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+    print(
+        f"python {platform.python_version()}, numpy {np.__version__}, clarabel {clarabel.__version__}, "
+        f"{os.cpu_count()} CPUs, load average {load[0]:.2f}; tol={args.tol:g} m^2, max_lps={args.max_lps}, "
+        f"{args.cases} states x {args.repeats} calls per row\n"
+    )
+    header = ["contacts", "friction", "strategy", "median ms/call", "p90 ms/call"]
+    header += ["LPs/call (mean / max)", "median us/LP (call / LPs)", "empty"]
+    print("| " + " | ".join(header) + " |")
+    print("|---|---|---|---|---|---|---|---|")
+    strategies = [("update q", fr._SupportOracle)]
+    if args.rebuild:
+        strategies.append(("rebuild", _RebuildOracle))
+    for n_contacts in (4, 3, 2):
+        kws = make_cases(n_contacts, args.cases, args.seed)
+        for friction in FRICTIONS:
+            for label, oracle in strategies:
+                original = fr._SupportOracle
+                fr._SupportOracle = oracle  # type: ignore[misc]  # looked up at call time
+                try:
+                    r = run(kws, friction, args.repeats, args.tol, args.max_lps)
+                finally:
+                    fr._SupportOracle = original  # type: ignore[misc]
+                name = friction if isinstance(friction, str) else f"pyramid-{friction[1]}"
+                print(
+                    f"| {n_contacts} | {name} | {label} | {r['median_ms']:.2f} | {r['p90_ms']:.2f} | "
+                    f"{r['mean_lps']:.1f} / {r['max_lps']:.0f} | {r['us_per_lp']:.0f} | {r['empty_pct']:.0f} % |"
+                )
+
+
+if __name__ == "__main__":
+    main()

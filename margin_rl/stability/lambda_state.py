@@ -1,0 +1,184 @@
+"""The 47-D stability input lambda of seed 000 eq. (4), declared once.
+
+    lambda = ( e_g | c_dot, c_ddot, w_dot, f_ext, tau_ext, p_1..p_4 | mu, c_1..c_4, n_1..n_4 )  in R^47
+
+Frames
+------
+* ``gravity_axis``: e_g, the third row of the base orientation matrix R (base in a gravity-aligned
+  frame), i.e. the world up axis expressed in the base frame B (unit vector; (0, 0, 1) when level).
+* Every other vector is expressed in the *horizontal frame* H: origin at the robot's CoM, z against
+  gravity, x along the heading (the base x axis projected on the horizontal plane), so H differs from
+  the world by position and yaw and from B by roll and pitch. Feet are therefore positions relative
+  to the CoM, which is how lambda encodes where the CoM is.
+* ``feet`` are the foot-sphere centres (the ``<leg>_FOOT`` sites); the contact point of foot i is
+  p_i - r n_i for a sphere of radius r touching a surface of normal n_i.
+* ``contacts`` are 0/1 flags, ``normals`` unit surface normals pointing out of the terrain.
+
+Leg order is LF, RF, LH, RH everywhere. :data:`LAMBDA_FIELDS` is the only place the layout is
+written; slices, names and converters are derived from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+N_FEET = 4
+
+
+@dataclass(frozen=True)
+class LambdaField:
+    """One named block of lambda."""
+
+    name: str
+    shape: tuple[int, ...]
+    frame: str  # "B" base, "H" horizontal, "-" frame-free
+    unit: str
+    description: str
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+
+LAMBDA_FIELDS: tuple[LambdaField, ...] = (
+    LambdaField("gravity_axis", (3,), "B", "-", "e_g: world up axis in the base frame (3rd row of R)"),
+    LambdaField("com_vel", (3,), "H", "m/s", "CoM linear velocity c_dot"),
+    LambdaField("com_acc", (3,), "H", "m/s^2", "CoM linear acceleration c_ddot"),
+    LambdaField("base_ang_acc", (3,), "H", "rad/s^2", "base angular acceleration w_dot"),
+    LambdaField("ext_force", (3,), "H", "N", "external force on the robot, applied at the CoM"),
+    LambdaField("ext_torque", (3,), "H", "N m", "external torque on the robot"),
+    LambdaField("feet", (N_FEET, 3), "H", "m", "foot-sphere centres relative to the CoM, LF RF LH RH"),
+    LambdaField("mu", (1,), "-", "-", "terrain friction coefficient"),
+    LambdaField("contacts", (N_FEET,), "-", "-", "contact flags c_i in {0, 1}"),
+    LambdaField("normals", (N_FEET, 3), "H", "-", "terrain normals at the feet (unit, out of the terrain)"),
+)
+
+LAMBDA_DIM: int = sum(f.size for f in LAMBDA_FIELDS)
+
+
+def _slices() -> dict[str, slice]:
+    out, start = {}, 0
+    for f in LAMBDA_FIELDS:
+        out[f.name] = slice(start, start + f.size)
+        start += f.size
+    return out
+
+
+LAMBDA_SLICES: dict[str, slice] = _slices()
+"""Slice of each field in the flat 47-vector."""
+
+_AXES = ("x", "y", "z")
+
+
+def lambda_names() -> tuple[str, ...]:
+    """One readable name per lambda entry, e.g. ``com_acc.x``, ``feet.LF.z``, ``contacts.RH``."""
+    legs = ("LF", "RF", "LH", "RH")
+    names: list[str] = []
+    for f in LAMBDA_FIELDS:
+        if f.shape == (1,):
+            names.append(f.name)
+        elif f.shape == (3,):
+            names.extend(f"{f.name}.{a}" for a in _AXES)
+        elif f.shape == (N_FEET,):
+            names.extend(f"{f.name}.{leg}" for leg in legs)
+        else:
+            names.extend(f"{f.name}.{leg}.{a}" for leg in legs for a in _AXES)
+    return tuple(names)
+
+
+@dataclass(frozen=True)
+class StabilityState:
+    """lambda as named arrays (see the module docstring for frames and units).
+
+    Every field may carry leading batch dimensions: ``com_vel`` has shape (..., 3), ``feet`` (..., 4, 3),
+    ``mu`` (...,), ``contacts`` (..., 4) and so on.
+    """
+
+    gravity_axis: np.ndarray
+    com_vel: np.ndarray
+    com_acc: np.ndarray
+    base_ang_acc: np.ndarray
+    ext_force: np.ndarray
+    ext_torque: np.ndarray
+    feet: np.ndarray
+    mu: np.ndarray
+    contacts: np.ndarray
+    normals: np.ndarray
+
+    def to_lambda(self) -> np.ndarray:
+        """Flatten to (..., 47) in the order of :data:`LAMBDA_FIELDS`."""
+        batch = np.shape(self.mu)
+        parts = []
+        for f in LAMBDA_FIELDS:
+            value = np.asarray(getattr(self, f.name), dtype=float)
+            expected = batch + (() if f.shape == (1,) else f.shape)
+            if value.shape != expected:
+                raise ValueError(f"StabilityState.{f.name} has shape {value.shape}, expected {expected}")
+            parts.append(value.reshape(*batch, f.size))
+        return np.concatenate(parts, axis=-1)
+
+
+assert [f.name for f in fields(StabilityState)] == [f.name for f in LAMBDA_FIELDS]  # one layout
+
+
+def check_lambda(lam: np.ndarray, name: str = "lam") -> np.ndarray:
+    """Validate the shape and finiteness of lambda; returns it as a float array.
+
+    Raises:
+        ValueError: wrong last dimension, or a NaN/inf entry (the message names the lambda field).
+    """
+    arr = np.asarray(lam, dtype=float)
+    if arr.ndim == 0 or arr.shape[-1] != LAMBDA_DIM:
+        raise ValueError(f"{name} must have shape ({LAMBDA_DIM},) or (N, {LAMBDA_DIM}), got {arr.shape}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        names = lambda_names()
+        columns = sorted(set(np.nonzero(bad.reshape(-1, LAMBDA_DIM))[1].tolist()))
+        raise ValueError(f"{name} has NaN or infinite entries in {', '.join(names[c] for c in columns)}")
+    return arr
+
+
+def from_lambda(lam: np.ndarray) -> StabilityState:
+    """Split (..., 47) into a :class:`StabilityState` (views, no copies)."""
+    arr = np.asarray(lam, dtype=float)
+    if arr.ndim == 0 or arr.shape[-1] != LAMBDA_DIM:
+        raise ValueError(f"lambda must have last dimension {LAMBDA_DIM}, got shape {arr.shape}")
+    batch = arr.shape[:-1]
+    values = {}
+    for f in LAMBDA_FIELDS:
+        block = arr[..., LAMBDA_SLICES[f.name]]
+        values[f.name] = block[..., 0] if f.shape == (1,) else block.reshape(*batch, *f.shape)
+    return StabilityState(**values)
+
+
+def gravity_axis_from_roll_pitch(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
+    """e_g for base roll and pitch angles [rad] (Z-Y-X Euler, yaw irrelevant): (..., 3)."""
+    roll, pitch = np.asarray(roll, dtype=float), np.asarray(pitch, dtype=float)
+    return np.stack([-np.sin(pitch), np.cos(pitch) * np.sin(roll), np.cos(pitch) * np.cos(roll)], axis=-1)
+
+
+def base_rotation_from_gravity_axis(gravity_axis: np.ndarray) -> np.ndarray:
+    """Orientation R_HB of the base in the horizontal frame, from e_g: (..., 3) -> (..., 3, 3).
+
+    With Z-Y-X Euler angles R = Rz(yaw) Ry(pitch) Rx(roll), the third row of R is
+    (-sin pitch, cos pitch sin roll, cos pitch cos roll) whatever the yaw, so pitch = -asin(e_x) and
+    roll = atan2(e_y, e_z). H has zero yaw by definition, hence R_HB = Ry(pitch) Rx(roll).
+
+    Raises:
+        ValueError: if a gravity axis is not a unit vector (to 1e-3).
+    """
+    e = np.asarray(gravity_axis, dtype=float)
+    norm = np.linalg.norm(e, axis=-1, keepdims=True)
+    if not np.all(np.abs(norm - 1.0) <= 1e-3):
+        raise ValueError(f"gravity_axis must be a unit vector, got norms {np.unique(norm.round(4)).tolist()[:5]}")
+    e = e / norm
+    pitch = -np.arcsin(np.clip(e[..., 0], -1.0, 1.0))
+    roll = np.arctan2(e[..., 1], e[..., 2])
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    zero = np.zeros_like(cr)
+    return np.stack(
+        [np.stack([cp, sp * sr, sp * cr], -1), np.stack([zero, cr, -sr], -1), np.stack([-sp, cp * sr, cp * cr], -1)],
+        axis=-2,
+    )

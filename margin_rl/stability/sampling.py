@@ -1,0 +1,171 @@
+"""The Table I sampler of seed 000: random lambda around a robot's nominal stance.
+
+Every distribution of Table I, in one frozen config (:class:`TableI`), vectorised and seeded:
+
+=====================================  =========================================================
+feet in contact                        X ~ U(0, 3), read as numpy's ``integers(0, 3)``: X in {0, 1, 2}
+                                       lifted feet, equally likely. X = 1 lifts one foot chosen
+                                       uniformly (3-contact); X = 2 lifts a diagonal pair (LF+RH or
+                                       RF+LH, uniformly), leaving a trot stance (2-contact). Table I
+                                       does not say more; this reading produces exactly the 4-, 3-
+                                       and 2-contact (diagonal) states the paper's gaits use.
+base roll, pitch                       U(-pi/15, pi/15) -> e_g
+CoM velocity                           x, y ~ U(-1.25, 1.25), z ~ N(0, 0.2) [m/s]
+CoM acceleration                       x, y ~ U(-2.5, 2.5), z ~ U(-1.25, 1.25) [m/s^2]
+base angular acceleration              x, y ~ U(-1, 1), z ~ N(0, 0.5) [rad/s^2]
+friction coefficient                   mu ~ U(0.2, 0.9)
+foot deviation from nominal (H frame)  x ~ U(-0.35, 0.35), y, z ~ U(-0.2, 0.2) [m]
+contact normal tilts                   alpha, beta ~ N(0, pi/8): n = Ry(beta) Rx(alpha) e_z
+external force, torque                 each component N(0, 50) [N], N(0, 25) [N m]
+=====================================  =========================================================
+
+N(m, s) denotes mean m and standard deviation s. The nominal stance is the robot's ``standing``
+keyframe with a level base: feet positions relative to the whole-body CoM.
+
+Kinematic feasibility: Table I's foot deviations (35 cm in x, 20 cm in y and z) put most draws
+outside the leg workspace (measured: about 93 % of raw draws have at least one unreachable foot on
+ANYmal B and C). Such states cannot occur on the robot and have no margin, so by default the sampler
+keeps only draws whose four feet are reachable (rejection sampling: the Table I distribution
+conditioned on kinematic feasibility), checked with the same IK and CoM fixed point as the analytic
+margin. ``reachable_only=False`` returns raw Table I draws.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from margin_rl.robot import Robot
+from margin_rl.stability.lambda_state import (
+    LAMBDA_DIM,
+    N_FEET,
+    StabilityState,
+    base_rotation_from_gravity_axis,
+    from_lambda,
+    gravity_axis_from_roll_pitch,
+)
+
+SAMPLER_VERSION = 1
+"""Bumped whenever the sampler's output for a given seed changes."""
+
+# Diagonal (trot) pairs of lifted feet, indices into LF, RF, LH, RH.
+_DIAGONAL_PAIRS = np.array([[0, 3], [1, 2]])
+
+
+@dataclass(frozen=True)
+class TableI:
+    """Sampling distributions of seed 000 Table I (uniform half-widths, normal standard deviations)."""
+
+    max_lifted_feet: int = 2  # X ~ integers(0, max_lifted_feet + 1)
+    roll_pitch_half_width: float = np.pi / 15  # [rad]
+    com_vel_xy_half_width: float = 1.25  # [m/s]
+    com_vel_z_std: float = 0.2  # [m/s]
+    com_acc_xy_half_width: float = 2.5  # [m/s^2]
+    com_acc_z_half_width: float = 1.25  # [m/s^2]
+    ang_acc_xy_half_width: float = 1.0  # [rad/s^2]
+    ang_acc_z_std: float = 0.5  # [rad/s^2]
+    mu_low: float = 0.2
+    mu_high: float = 0.9
+    foot_x_half_width: float = 0.35  # [m]
+    foot_yz_half_width: float = 0.2  # [m]
+    normal_tilt_std: float = np.pi / 8  # [rad]
+    ext_force_std: float = 50.0  # [N]
+    ext_torque_std: float = 25.0  # [N m]
+
+    def __post_init__(self) -> None:
+        if self.max_lifted_feet not in (0, 1, 2):
+            raise ValueError(f"max_lifted_feet must be 0, 1 or 2, got {self.max_lifted_feet}")
+        if not self.mu_low > 0 or not self.mu_high > self.mu_low:
+            raise ValueError(f"need 0 < mu_low < mu_high, got {self.mu_low}, {self.mu_high}")
+
+
+def nominal_feet(robot: Robot) -> np.ndarray:
+    """(4, 3) foot-sphere centres relative to the CoM at the standing pose with a level base [m]."""
+    q = robot.standing_joint_pos
+    return robot.foot_positions(q) - robot.com_position(q)
+
+
+def reachable(robot: Robot, lam: np.ndarray, com_iterations: int = 10) -> np.ndarray:
+    """Which states have all four feet inside their leg workspace and joint limits: (N,) bool.
+
+    Same test as the analytic margin's step 2 (IK of p_B = R_HB^T p_H + c_B with the CoM offset c_B
+    found by fixed-point iteration), batched with the closed-form CoM.
+    """
+    st = from_lambda(lam)
+    R = base_rotation_from_gravity_axis(st.gravity_axis)
+    feet = np.einsum("...fi,...ij->...fj", st.feet, R)  # R^T p_H, row-wise
+    solution, _ = robot.inverse_kinematics_com_relative(feet, iterations=com_iterations)
+    return solution.reachable.all(axis=-1)
+
+
+def sample_states(
+    robot: Robot, n: int, seed: int, table: TableI | None = None, reachable_only: bool = True
+) -> np.ndarray:
+    """Draw ``n`` lambda vectors (n, 47) from Table I around ``robot``'s nominal stance.
+
+    Args:
+        robot: the robot whose standing pose defines the nominal feet.
+        n: number of samples (>= 0).
+        seed: seed of a ``numpy.random.default_rng``; the same (robot, n, seed, table) gives the same
+            samples (and a prefix of a longer draw is *not* guaranteed: draw shards with their own seeds).
+        table: the distributions; Table I of the paper if omitted.
+        reachable_only: keep only kinematically feasible draws (see the module docstring).
+    """
+    if int(n) != n or n < 0:
+        raise ValueError(f"n must be a non-negative integer, got {n!r}")
+    n = int(n)
+    t = TableI() if table is None else table
+    rng = np.random.default_rng(seed)
+    if not reachable_only:
+        return _draw(robot, n, rng, t)
+    kept: list[np.ndarray] = []
+    count = 0
+    while count < n:
+        # Oversample: about 7 % of raw draws are reachable.
+        batch = _draw(robot, max(1024, 16 * (n - count)), rng, t)
+        batch = batch[reachable(robot, batch)]
+        kept.append(batch[: n - count])
+        count += len(kept[-1])
+    return np.concatenate(kept) if kept else np.zeros((0, LAMBDA_DIM))
+
+
+def _draw(robot: Robot, n: int, rng: np.random.Generator, t: TableI) -> np.ndarray:
+
+    def uniform(half_width: float, size: tuple[int, ...] | int) -> np.ndarray:
+        return rng.uniform(-half_width, half_width, size=size)
+
+    contacts = np.ones((n, N_FEET))
+    lifted = rng.integers(0, t.max_lifted_feet + 1, size=n)
+    one = np.nonzero(lifted == 1)[0]
+    contacts[one, rng.integers(0, N_FEET, size=one.size)] = 0.0
+    two = np.nonzero(lifted == 2)[0]
+    pairs = _DIAGONAL_PAIRS[rng.integers(0, 2, size=two.size)]
+    contacts[two[:, None], pairs] = 0.0
+
+    roll = uniform(t.roll_pitch_half_width, n)
+    pitch = uniform(t.roll_pitch_half_width, n)
+    com_vel = np.column_stack([uniform(t.com_vel_xy_half_width, (n, 2)), rng.normal(0, t.com_vel_z_std, n)])
+    com_acc = np.column_stack([uniform(t.com_acc_xy_half_width, (n, 2)), uniform(t.com_acc_z_half_width, n)])
+    ang_acc = np.column_stack([uniform(t.ang_acc_xy_half_width, (n, 2)), rng.normal(0, t.ang_acc_z_std, n)])
+    mu = rng.uniform(t.mu_low, t.mu_high, size=n)
+    deviation = np.concatenate(
+        [uniform(t.foot_x_half_width, (n, N_FEET, 1)), uniform(t.foot_yz_half_width, (n, N_FEET, 2))], axis=-1
+    )
+    feet = nominal_feet(robot) + deviation
+    alpha = rng.normal(0, t.normal_tilt_std, (n, N_FEET))
+    beta = rng.normal(0, t.normal_tilt_std, (n, N_FEET))
+    normals = np.stack([np.cos(alpha) * np.sin(beta), -np.sin(alpha), np.cos(alpha) * np.cos(beta)], axis=-1)
+    state = StabilityState(
+        gravity_axis=gravity_axis_from_roll_pitch(roll, pitch),
+        com_vel=com_vel,
+        com_acc=com_acc,
+        base_ang_acc=ang_acc,
+        ext_force=rng.normal(0, t.ext_force_std, (n, 3)),
+        ext_torque=rng.normal(0, t.ext_torque_std, (n, 3)),
+        feet=feet,
+        mu=mu,
+        contacts=contacts,
+        normals=normals,
+    )
+    return state.to_lambda()

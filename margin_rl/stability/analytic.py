@@ -111,7 +111,7 @@ class AnalyticMarginResult:
     capture_point: np.ndarray  # (2,) ICP in H relative to the current CoM [m]
     com_height: float  # CoM height above the stance contact points [m]
     joint_pos: np.ndarray  # (12,) from IK [rad] (NaN where unreachable)
-    timings: dict[str, float] = field(default_factory=dict)  # [s]: kinematics, dynamics, region, total
+    timings: dict[str, float] = field(default_factory=dict)  # [s]: kinematics_dynamics, region, total
     message: str = ""
 
     @property
@@ -120,6 +120,7 @@ class AnalyticMarginResult:
 
 
 def _failed(status: str, t0: float, q: np.ndarray, message: str, **timings: float) -> AnalyticMarginResult:
+    """Result of a state without a margin (status other than ok)."""
     return AnalyticMarginResult(
         margin=float("nan"),
         status=status,
@@ -129,6 +130,100 @@ def _failed(status: str, t0: float, q: np.ndarray, message: str, **timings: floa
         joint_pos=q,
         timings={**timings, "total": time.perf_counter() - t0},
         message=message,
+    )
+
+
+@dataclass(frozen=True)
+class ContactProblem:
+    """Everything a stability criterion needs about one state, in the horizontal frame H.
+
+    Built by :func:`contact_problem` (steps 1-4 of the module docstring); shared by the feasible
+    region (:func:`analytic_margin`) and the feasible wrench polytope criterion.
+    """
+
+    contact_points: np.ndarray  # (4, 3) foot-sphere contact points relative to the CoM [m]
+    normals: np.ndarray  # (4, 3) unit terrain normals
+    stance: np.ndarray  # (4,) bool
+    mu: float
+    mass: float  # [kg]
+    gravity: float  # [m/s^2]
+    jacobians: np.ndarray  # (4, 3, 3) foot Jacobians w.r.t. each leg's joints, in H
+    torque_limits: np.ndarray  # (4, 3) symmetric limits [N m]
+    leg_bias: np.ndarray  # (4, 3) delta_i [N m]
+    com_acc: np.ndarray  # (3,) [m/s^2]
+    ang_momentum_rate: np.ndarray  # (3,) L_dot about the CoM [N m]
+    ext_force: np.ndarray  # (3,) [N]
+    ext_torque: np.ndarray  # (3,) [N m]
+    com_vel: np.ndarray  # (3,) [m/s]
+    com_height: float  # CoM height above the stance contact points [m]
+    capture_point: np.ndarray  # (2,) ICP relative to the CoM [m], eq. (5)
+    joint_pos: np.ndarray  # (12,) [rad]
+    base_rotation: np.ndarray  # (3, 3) R_HB
+
+
+def contact_problem(
+    robot: Robot, lam: np.ndarray, settings: AnalyticSettings | None = None
+) -> ContactProblem | tuple[str, str, np.ndarray]:
+    """Steps 1-4 of the pipeline: lambda -> IK, Jacobians, bias torques, contact points, ICP.
+
+    Returns:
+        A :class:`ContactProblem`, or ``(status, message, joint_pos)`` when the state has no answer
+        ("no_contact", "unreachable", "infeasible" for a CoM not above its stance feet).
+
+    Raises:
+        ValueError: lambda of the wrong shape, with NaN/inf (the message names the field), a
+            non-unit gravity axis, contact flags other than 0/1, or mu <= 0.
+    """
+    s = AnalyticSettings() if settings is None else settings
+    lam = check_lambda(lam)
+    if lam.shape != (LAMBDA_DIM,):
+        raise ValueError(f"one lambda of shape ({LAMBDA_DIM},) is expected, got {lam.shape}")
+    st = from_lambda(lam)
+    if not np.all((st.contacts == 0.0) | (st.contacts == 1.0)):
+        raise ValueError(f"lambda contacts must be 0 or 1, got {st.contacts.tolist()}")
+    if not st.mu > 0:
+        raise ValueError(f"lambda mu must be positive, got {float(st.mu)}")
+    R = base_rotation_from_gravity_axis(st.gravity_axis)
+    stance = st.contacts.astype(bool)
+    if not stance.any():
+        return "no_contact", "no foot in contact", np.full(12, np.nan)
+
+    # 2. IK with the CoM-offset fixed point.
+    ik, _ = robot.inverse_kinematics_com_relative(st.feet @ R, s.com_iterations, s.com_tol)  # rows: R^T p_H
+    if not ik.reachable.all():
+        legs = [leg for leg, ok in zip(robot.leg_names, ik.reachable, strict=True) if not ok]
+        return "unreachable", f"unreachable feet: {', '.join(legs)}", ik.joint_pos
+    q = ik.joint_pos
+
+    # 3. Jacobians, bias torques and centroidal angular-momentum rate in H.
+    jacobians = robot.leg_jacobians(q, base_rotation=R)
+    dynamics = robot.rigid_body_dynamics(q, base_rotation=R, com_acc=st.com_acc, base_ang_acc=st.base_ang_acc)
+
+    # 4. Contact points of the foot spheres, CoM height above them, ICP.
+    normals = st.normals / np.linalg.norm(st.normals, axis=-1, keepdims=True)
+    contact_points = st.feet - robot.foot_radius * normals
+    com_height = float(-np.mean(contact_points[stance, 2]))
+    if not com_height > 0:
+        return "infeasible", f"CoM is not above the stance feet (height {com_height:.3f} m)", q
+    return ContactProblem(
+        contact_points=contact_points,
+        normals=normals,
+        stance=stance,
+        mu=float(st.mu),
+        mass=robot.total_mass,
+        gravity=robot.gravity,
+        jacobians=jacobians,
+        torque_limits=robot.torque_limits.reshape(len(robot.legs), 3),
+        leg_bias=dynamics.bias_torques,
+        com_acc=st.com_acc,
+        ang_momentum_rate=dynamics.ang_momentum_rate,
+        ext_force=st.ext_force,
+        ext_torque=st.ext_torque,
+        com_vel=st.com_vel,
+        com_height=com_height,
+        capture_point=capture_point(np.zeros(2), st.com_vel[:2], com_height, g=robot.gravity),
+        joint_pos=q,
+        base_rotation=R,
     )
 
 
@@ -149,72 +244,37 @@ def analytic_margin(robot: Robot, lam: np.ndarray, settings: AnalyticSettings | 
     """
     t0 = time.perf_counter()
     s = AnalyticSettings() if settings is None else settings
-    lam = check_lambda(lam)
-    if lam.shape != (LAMBDA_DIM,):
-        raise ValueError(f"analytic_margin takes one lambda of shape ({LAMBDA_DIM},), got {lam.shape}")
-    st = from_lambda(lam)
-    if not np.all((st.contacts == 0.0) | (st.contacts == 1.0)):
-        raise ValueError(f"lambda contacts must be 0 or 1, got {st.contacts.tolist()}")
-    if not st.mu > 0:
-        raise ValueError(f"lambda mu must be positive, got {float(st.mu)}")
-    R = base_rotation_from_gravity_axis(st.gravity_axis)
-    stance = st.contacts.astype(bool)
-    if not stance.any():
-        return _failed("no_contact", t0, np.full(12, np.nan), "no foot in contact")
-
-    # 2. IK with the CoM-offset fixed point.
-    feet_base_rel_com = st.feet @ R  # rows: R^T p_H
-    ik, _ = robot.inverse_kinematics_com_relative(feet_base_rel_com, s.com_iterations, s.com_tol)
-    if not ik.reachable.all():
-        legs = [leg for leg, ok in zip(robot.leg_names, ik.reachable, strict=True) if not ok]
-        return _failed(
-            "unreachable", t0, ik.joint_pos, f"unreachable feet: {', '.join(legs)}", kinematics=time.perf_counter() - t0
-        )
-    q = ik.joint_pos
+    problem = contact_problem(robot, lam, s)
     t1 = time.perf_counter()
+    if not isinstance(problem, ContactProblem):
+        status, message, q = problem
+        return _failed(status, t0, q, message, kinematics=t1 - t0)
 
-    # 3. Jacobians, bias torques and centroidal angular-momentum rate in H.
-    jacobians = robot.leg_jacobians(q, base_rotation=R)
-    dynamics = robot.rigid_body_dynamics(q, base_rotation=R, com_acc=st.com_acc, base_ang_acc=st.base_ang_acc)
-    t2 = time.perf_counter()
-
-    # 4. Feasible region of the CoM over the stance contact points.
-    normals = st.normals / np.linalg.norm(st.normals, axis=-1, keepdims=True)
-    contact_points = st.feet - robot.foot_radius * normals
-    com_height = float(-np.mean(contact_points[stance, 2]))
-    if not com_height > 0:
-        return _failed(
-            "infeasible",
-            t0,
-            q,
-            f"CoM is not above the stance feet (height {com_height:.3f} m)",
-            kinematics=t1 - t0,
-            dynamics=t2 - t1,
-        )
-    icp = capture_point(np.zeros(2), st.com_vel[:2], com_height, g=robot.gravity)
+    # 4. Feasible region of the CoM over the stance contact points, focused on the ICP (step 5).
+    icp = problem.capture_point
     focus = {} if s.focus_tol is None else {"focus": icp, "focus_tol": s.focus_tol}
     region = feasible_region(
-        feet=contact_points,
-        normals=normals,
-        stance=stance,
-        mu=float(st.mu),
-        mass=robot.total_mass,
-        jacobians=jacobians,
-        torque_limits=robot.torque_limits.reshape(len(robot.legs), 3),
-        leg_bias=dynamics.bias_torques,
-        com_acc=st.com_acc,
-        ang_momentum_rate=dynamics.ang_momentum_rate,
-        ext_force=st.ext_force,
-        ext_torque=st.ext_torque,
+        feet=problem.contact_points,
+        normals=problem.normals,
+        stance=problem.stance,
+        mu=problem.mu,
+        mass=problem.mass,
+        jacobians=problem.jacobians,
+        torque_limits=problem.torque_limits,
+        leg_bias=problem.leg_bias,
+        com_acc=problem.com_acc,
+        ang_momentum_rate=problem.ang_momentum_rate,
+        ext_force=problem.ext_force,
+        ext_torque=problem.ext_torque,
         friction=s.friction,
         tol=s.tol,
         contact_torque_limit=s.contact_torque_limit,
-        gravity=robot.gravity,
+        gravity=problem.gravity,
         max_lps=s.max_lps,
         **focus,
     )
-    t3 = time.perf_counter()
-    timings = {"kinematics": t1 - t0, "dynamics": t2 - t1, "region": t3 - t2}
+    t2 = time.perf_counter()
+    timings = {"kinematics_dynamics": t1 - t0, "region": t2 - t1}
     if region.status != "ok":
         status = "infeasible" if region.status == "empty" else "solver_error"
         return AnalyticMarginResult(
@@ -222,8 +282,8 @@ def analytic_margin(robot: Robot, lam: np.ndarray, settings: AnalyticSettings | 
             status=status,
             region=region,
             capture_point=np.full(2, np.nan),
-            com_height=com_height,
-            joint_pos=q,
+            com_height=problem.com_height,
+            joint_pos=problem.joint_pos,
             timings={**timings, "total": time.perf_counter() - t0},
             message=region.message,
         )
@@ -235,8 +295,8 @@ def analytic_margin(robot: Robot, lam: np.ndarray, settings: AnalyticSettings | 
         status="ok",
         region=region,
         capture_point=np.asarray(icp),
-        com_height=com_height,
-        joint_pos=q,
+        com_height=problem.com_height,
+        joint_pos=problem.joint_pos,
         timings={**timings, "total": time.perf_counter() - t0},
     )
 

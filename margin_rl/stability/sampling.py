@@ -100,15 +100,20 @@ def reachable(robot: Robot, lam: np.ndarray, com_iterations: int = 10) -> np.nda
 
 
 def sample_states(
-    robot: Robot, n: int, seed: int, table: TableI | None = None, reachable_only: bool = True
+    robot: Robot,
+    n: int,
+    seed: int | np.random.SeedSequence,
+    table: TableI | None = None,
+    reachable_only: bool = True,
 ) -> np.ndarray:
     """Draw ``n`` lambda vectors (n, 47) from Table I around ``robot``'s nominal stance.
 
     Args:
         robot: the robot whose standing pose defines the nominal feet.
         n: number of samples (>= 0).
-        seed: seed of a ``numpy.random.default_rng``; the same (robot, n, seed, table) gives the same
-            samples (and a prefix of a longer draw is *not* guaranteed: draw shards with their own seeds).
+        seed: an int or ``numpy.random.SeedSequence`` for ``numpy.random.default_rng``; the same
+            (robot, n, seed, table) gives the same samples. A shorter draw is *not* a prefix of a
+            longer one: draw shards with their own seeds.
         table: the distributions; Table I of the paper if omitted.
         reachable_only: keep only kinematically feasible draws (see the module docstring).
     """

@@ -63,6 +63,16 @@ class DatasetSpec:
     def shard_length(self, index: int) -> int:
         return min(self.shard_size, self.n - index * self.shard_size)
 
+    def command(self, out: str | Path) -> str:
+        """The command line that generates this dataset into ``out``."""
+        friction = self.settings.friction
+        friction_arg = friction if isinstance(friction, str) else f"{friction[0]}:{friction[1]}"
+        return (
+            f"python -m margin_rl.dataset generate --robot {self.robot} --n {self.n} --out {shlex.quote(str(out))} "
+            f"--seed {self.seed} --shard-size {self.shard_size} --friction {friction_arg} "
+            f"--focus-tol {self.settings.focus_tol}"
+        )
+
     def identity(self) -> dict[str, object]:
         """The fields that must match to resume or extend a directory (n may grow)."""
         return {
@@ -220,7 +230,7 @@ def generate(
         raise DatasetError(f"unknown robot {spec.robot!r}; available robots: {', '.join(available_robots())}")
     if spec.n <= 0 or spec.shard_size <= 0:
         raise DatasetError(f"n and shard size must be positive, got n={spec.n}, shard size={spec.shard_size}")
-    todo = _prepare(spec, out, command)
+    todo = _prepare(spec, out, command or spec.command(out))
     workers = (os.cpu_count() or 1) if workers is None else workers
     if workers < 1:
         raise DatasetError(f"workers must be >= 1, got {workers}")

@@ -58,8 +58,7 @@ def test_mismatched_configuration_is_refused(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="different configuration"):
         generate_dataset(tmp_path, DatasetConfig(n=300, shard_size=300, seed=1))
     with pytest.raises(ValueError, match="different configuration"):
-        generate_dataset(tmp_path, DatasetConfig(n=300, shard_size=300, seed=0,
-                                                 params=SlipParams(friction=0.6)))
+        generate_dataset(tmp_path, DatasetConfig(n=300, shard_size=300, seed=0, params=SlipParams(friction=0.6)))
 
 
 def test_atomic_savez_leaves_no_temporary_files(tmp_path: Path) -> None:

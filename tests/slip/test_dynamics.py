@@ -82,8 +82,7 @@ def test_energy_bookkeeping_with_damping_and_actuation() -> None:
     batch = simulate_batch(states, actions)
     ok = batch.valid
     assert ok.sum() >= 10
-    residual = batch.energy1 - (batch.energy0 + batch.work_actuator - batch.work_damping
-                                - batch.leg_energy_loss)
+    residual = batch.energy1 - (batch.energy0 + batch.work_actuator - batch.work_damping - batch.leg_energy_loss)
     assert np.max(np.abs(residual[ok])) < 1e-6
     # Damping must actually dissipate, otherwise the identity above is vacuous.
     assert np.all(batch.work_damping[ok] > 1e-4)
@@ -113,7 +112,9 @@ def test_vertical_hop_damping_loses_and_actuator_adds_height() -> None:
 
 @settings(max_examples=25, deadline=None)
 @given(
-    y=st.floats(0.9, 1.2), xdot=st.floats(-1.0, 1.0), alpha=st.floats(-0.5, 0.5),
+    y=st.floats(0.9, 1.2),
+    xdot=st.floats(-1.0, 1.0),
+    alpha=st.floats(-0.5, 0.5),
     dl=st.floats(-0.05, 0.15),
 )
 def test_mirror_symmetry(y: float, xdot: float, alpha: float, dl: float) -> None:

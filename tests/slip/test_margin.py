@@ -72,12 +72,17 @@ def test_tree_samples_get_the_same_margin_as_fresh_queries() -> None:
     fm = FailureMargin.from_samples(tree_pts, tree_lab)
     got = fm.oriented_distance(tree_pts, tree_lab)
     # Brute force treats each point as a fresh query against the *other* points only.
-    want = np.array([
-        brute_force_oriented_distance(tree_pts[i:i + 1], tree_lab[i:i + 1],
-                                      np.delete(tree_pts, i, 0)[np.delete(tree_lab, i)],
-                                      np.delete(tree_pts, i, 0)[~np.delete(tree_lab, i)])[0]
-        for i in range(len(tree_pts))
-    ])
+    want = np.array(
+        [
+            brute_force_oriented_distance(
+                tree_pts[i : i + 1],
+                tree_lab[i : i + 1],
+                np.delete(tree_pts, i, 0)[np.delete(tree_lab, i)],
+                np.delete(tree_pts, i, 0)[~np.delete(tree_lab, i)],
+            )[0]
+            for i in range(len(tree_pts))
+        ]
+    )
     np.testing.assert_allclose(got, want, rtol=1e-12)
 
 

@@ -92,7 +92,7 @@ def test_fit_learns_a_smooth_function() -> None:
     net, hist = fit(z, target, np.ones(2), TrainConfig(iters=1500, batch_size=256))
     assert hist[-1] < 0.1 * hist[0]
     err = net(z) - target
-    assert np.mean(err ** 2) < 0.01 * np.var(target, axis=0).sum()
+    assert np.mean(err**2) < 0.01 * np.var(target, axis=0).sum()
 
 
 def test_fit_rejects_bad_shapes() -> None:
@@ -112,8 +112,9 @@ def test_threshold_curve_by_hand() -> None:
 
 def test_train_bundle_end_to_end(tmp_path: Path) -> None:
     generate_dataset(tmp_path / "data", DatasetConfig(n=3000, shard_size=1500, seed=9))
-    card = train_bundle(load_dataset(tmp_path / "data"), tmp_path / "w", TrainConfig(iters=200),
-                        figure=tmp_path / "fig.png")
+    card = train_bundle(
+        load_dataset(tmp_path / "data"), tmp_path / "w", TrainConfig(iters=200), figure=tmp_path / "fig.png"
+    )
     assert (tmp_path / "fig.png").stat().st_size > 1000
     loaded = load_bundle(tmp_path / "w")
     assert json.loads((tmp_path / "w" / "card.json").read_text()) == loaded.card

@@ -1,0 +1,309 @@
+"""Learned stability margin m_l = MLP(lambda) of seed 000 §IV: fast value, gradient and torch module.
+
+The network is the paper's: 47 - 256 - 128 - 128 - 1, softsign activations, with input normalisation
+(fitted on the training split) and output scaling stored with the weights, so every entry point takes
+raw lambda (:mod:`margin_rl.stability.lambda_state`) and returns metres::
+
+    m_l(lam) = s_y * MLP((lam - mu_x) / s_x) + mu_y,     softsign(z) = z / (1 + |z|)
+
+``LearnedMargin.load("anymal_c")`` reads the bundled weights (``weights/<robot>.npz``, never a
+pickle) and checks them against their model card (``weights/<robot>.json``: sha256, layout, shapes).
+
+* ``model(lam)``: one lambda (47,) -> float, or a batch (N, 47) -> (N,), in numpy (microseconds);
+* ``model.grad(lam)``: dm/dlambda by exact backpropagation in numpy, (47,) or (N, 47);
+* ``model.value_and_grad(lam)``: both in one pass;
+* ``model.torch_module()``: the same network as a ``torch.nn.Module`` for differentiable use;
+* ``model.export_onnx(path)``: ONNX for C++ users;
+* ``model.out_of_distribution(lam)``: True where lambda leaves the per-field ranges seen in training.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.resources
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from margin_rl.stability.lambda_state import LAMBDA_DIM, LAMBDA_FIELDS, check_lambda, lambda_names
+
+ARCHITECTURE: tuple[int, ...] = (LAMBDA_DIM, 256, 128, 128, 1)
+"""Layer widths of seed 000 §IV-A."""
+
+WEIGHTS_FORMAT = 1
+_CONTACTS = slice(sum(f.size for f in LAMBDA_FIELDS[:8]), sum(f.size for f in LAMBDA_FIELDS[:9]))
+
+
+class WeightsError(ValueError):
+    """A weights file that is missing, corrupted or does not match this package."""
+
+
+def layout_signature() -> str:
+    """Hash of the lambda layout; weights trained on another layout are refused."""
+    text = ";".join(f"{f.name}:{f.shape}:{f.frame}" for f in LAMBDA_FIELDS)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def weights_dir() -> Path:
+    """Directory of the bundled weights (package data ``margin_rl/stability/weights``)."""
+    return Path(str(importlib.resources.files("margin_rl.stability").joinpath("weights")))
+
+
+def bundled_robots() -> tuple[str, ...]:
+    """Robots with bundled learned-margin weights."""
+    return tuple(sorted(p.stem for p in weights_dir().glob("*.npz")))
+
+
+def _softsign(z: np.ndarray) -> np.ndarray:
+    return z / (1.0 + np.abs(z))
+
+
+@dataclass(frozen=True)
+class MarginWeights:
+    """Parameters of the margin MLP in plain numpy (float32 on disk)."""
+
+    weights: tuple[np.ndarray, ...]  # W_k (out, in)
+    biases: tuple[np.ndarray, ...]  # b_k (out,)
+    input_mean: np.ndarray  # (47,)
+    input_std: np.ndarray  # (47,)
+    output_mean: float  # [m]
+    output_std: float  # [m]
+    lam_low: np.ndarray  # (47,) smallest value of each entry in the training split
+    lam_high: np.ndarray  # (47,) largest value
+
+    def validate(self, source: str = "weights") -> None:
+        widths = [self.weights[0].shape[1]] + [w.shape[0] for w in self.weights]
+        if tuple(widths) != ARCHITECTURE:
+            raise WeightsError(f"{source}: layer widths {widths}, expected {list(ARCHITECTURE)}")
+        for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            if b.shape != (w.shape[0],):
+                raise WeightsError(f"{source}: bias {k} has shape {b.shape}, expected ({w.shape[0]},)")
+        for name in ("input_mean", "input_std", "lam_low", "lam_high"):
+            if getattr(self, name).shape != (LAMBDA_DIM,):
+                raise WeightsError(f"{source}: {name} must have shape ({LAMBDA_DIM},)")
+        if not np.all(self.input_std > 0) or not self.output_std > 0:
+            raise WeightsError(f"{source}: normalisation scales must be positive")
+        arrays = [*self.weights, *self.biases, self.input_mean, self.input_std, self.lam_low, self.lam_high]
+        if not all(np.all(np.isfinite(a)) for a in arrays):
+            raise WeightsError(f"{source}: non-finite parameters")
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        out = {f"W{k}": w.astype(np.float32) for k, w in enumerate(self.weights)}
+        out |= {f"b{k}": b.astype(np.float32) for k, b in enumerate(self.biases)}
+        out |= {
+            "input_mean": self.input_mean.astype(np.float64),
+            "input_std": self.input_std.astype(np.float64),
+            "output_scale": np.array([self.output_mean, self.output_std], dtype=np.float64),
+            "lam_low": self.lam_low.astype(np.float64),
+            "lam_high": self.lam_high.astype(np.float64),
+        }
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], source: str = "weights") -> MarginWeights:
+        n_layers = len(ARCHITECTURE) - 1
+        required = [f"W{i}" for i in range(n_layers)] + [f"b{i}" for i in range(n_layers)]
+        required += ["input_mean", "input_std", "output_scale", "lam_low", "lam_high"]
+        missing = [k for k in required if k not in arrays]
+        if missing:
+            raise WeightsError(f"{source}: missing arrays {missing}")
+        w = cls(
+            weights=tuple(np.asarray(arrays[f"W{i}"], dtype=np.float64) for i in range(n_layers)),
+            biases=tuple(np.asarray(arrays[f"b{i}"], dtype=np.float64) for i in range(n_layers)),
+            input_mean=np.asarray(arrays["input_mean"], dtype=np.float64),
+            input_std=np.asarray(arrays["input_std"], dtype=np.float64),
+            output_mean=float(arrays["output_scale"][0]),
+            output_std=float(arrays["output_scale"][1]),
+            lam_low=np.asarray(arrays["lam_low"], dtype=np.float64),
+            lam_high=np.asarray(arrays["lam_high"], dtype=np.float64),
+        )
+        w.validate(source)
+        return w
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def save_weights(weights: MarginWeights, path: str | Path, card: dict[str, object]) -> dict[str, object]:
+    """Write ``<path>.npz`` and its model card ``<path>.json`` (with the npz's sha256 and layout)."""
+    path = Path(path).with_suffix("")
+    weights.validate(str(path))
+    npz = path.with_suffix(".npz")
+    np.savez(npz, **weights.to_arrays())
+    full_card = {
+        "format": WEIGHTS_FORMAT,
+        "architecture": list(ARCHITECTURE),
+        "activation": "softsign",
+        "lambda_layout": layout_signature(),
+        "lambda_names": list(lambda_names()),
+        **card,
+        "file": npz.name,
+        "sha256": _sha256(npz),
+    }
+    path.with_suffix(".json").write_text(json.dumps(full_card, indent=2) + "\n")
+    return full_card
+
+
+class LearnedMargin:
+    """The learned stability margin of one robot (see the module docstring)."""
+
+    def __init__(self, weights: MarginWeights, card: dict[str, object] | None = None, name: str = "") -> None:
+        weights.validate(name or "weights")
+        self.params = weights
+        self.card = dict(card or {})
+        self.name = name
+        # Fold the input normalisation into the first layer and the output scaling into the last:
+        # one matmul chain at inference, in float64 for the single-state path and float32 in batches.
+        W = [w.copy() for w in weights.weights]
+        b = [x.copy() for x in weights.biases]
+        W[0] = weights.weights[0] / weights.input_std[None, :]
+        b[0] = weights.biases[0] - W[0] @ weights.input_mean
+        W[-1] = weights.weights[-1] * weights.output_std
+        b[-1] = weights.biases[-1] * weights.output_std + weights.output_mean
+        self._W64 = [np.ascontiguousarray(w) for w in W]
+        self._b64 = b
+        self._W32T = [np.ascontiguousarray(w.T.astype(np.float32)) for w in W]
+        self._b32 = [x.astype(np.float32) for x in b]
+
+    # ------------------------------------------------------------------ loading
+    @classmethod
+    def load(cls, robot_or_path: str | Path) -> LearnedMargin:
+        """Bundled weights of a robot (``"anymal_b"``, ``"anymal_c"``) or a ``.npz`` path with its card.
+
+        Raises:
+            WeightsError: unknown robot (lists the bundled ones), missing card, checksum mismatch
+                (corrupted file), other lambda layout or format.
+        """
+        text = str(robot_or_path)
+        if text.endswith(".npz") or "/" in text or Path(text).suffix:
+            npz = Path(text).with_suffix(".npz")
+        else:
+            if text not in bundled_robots():
+                raise WeightsError(
+                    f"no learned margin for robot {text!r}; bundled: {', '.join(bundled_robots()) or 'none'}"
+                )
+            npz = weights_dir() / f"{text}.npz"
+        card_path = npz.with_suffix(".json")
+        if not npz.is_file():
+            raise WeightsError(f"weights file not found: {npz}")
+        if not card_path.is_file():
+            raise WeightsError(f"model card not found next to the weights: {card_path}")
+        try:
+            card = json.loads(card_path.read_text())
+        except json.JSONDecodeError as exc:
+            raise WeightsError(f"{card_path}: malformed model card ({exc})") from exc
+        digest = _sha256(npz)
+        if card.get("sha256") != digest:
+            raise WeightsError(
+                f"{npz}: checksum mismatch (card {card.get('sha256')!r}, file {digest!r}): "
+                "the file is corrupted or does not belong to this card"
+            )
+        if card.get("format") != WEIGHTS_FORMAT:
+            raise WeightsError(f"{npz}: weights format {card.get('format')!r}, this package reads {WEIGHTS_FORMAT}")
+        if card.get("lambda_layout") != layout_signature():
+            raise WeightsError(f"{npz}: trained for another lambda layout ({card.get('lambda_layout')!r})")
+        try:
+            with np.load(npz, allow_pickle=False) as data:
+                arrays = {k: data[k] for k in data.files}
+        except (ValueError, OSError) as exc:
+            raise WeightsError(f"{npz}: unreadable weights ({exc})") from exc
+        return cls(MarginWeights.from_arrays(arrays, str(npz)), card, name=str(card.get("robot", npz.stem)))
+
+    # ------------------------------------------------------------------ inference (numpy)
+    def __call__(self, lam: np.ndarray) -> float | np.ndarray:
+        """m_l [m] of one lambda (47,) -> float, or of a batch (N, 47) -> (N,)."""
+        x = check_lambda(lam)
+        if x.ndim == 1:
+            h = x
+            for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
+                h = _softsign(W @ h + b)
+            return float((self._W64[-1] @ h + self._b64[-1])[0])
+        if x.ndim != 2:
+            raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
+        h = x.astype(np.float32)
+        for WT, b in zip(self._W32T[:-1], self._b32[:-1], strict=True):
+            h = h @ WT
+            h += b
+            h = _softsign(h)
+        return (h @ self._W32T[-1] + self._b32[-1])[:, 0].astype(np.float64)
+
+    def value_and_grad(self, lam: np.ndarray) -> tuple[float | np.ndarray, np.ndarray]:
+        """(m_l, dm_l/dlambda) by exact backpropagation: (47,) -> (float, (47,)), (N, 47) -> ((N,), (N, 47))."""
+        x = check_lambda(lam)
+        if x.ndim == 1:
+            return self._value_and_grad_one(x)
+        h = x
+        if h.ndim != 2:
+            raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
+        derivatives = []
+        for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
+            z = h @ W.T + b
+            a = 1.0 + np.abs(z)
+            derivatives.append(1.0 / (a * a))  # softsign'(z)
+            h = z / a
+        value = (h @ self._W64[-1].T + self._b64[-1])[:, 0]
+        g = np.broadcast_to(self._W64[-1], (h.shape[0], self._W64[-1].shape[1]))
+        for W, d in zip(reversed(self._W64[:-1]), reversed(derivatives), strict=True):
+            g = (g * d) @ W
+        return value, g
+
+    def _value_and_grad_one(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """Matrix-vector version for one lambda (no batch broadcasting: tens of microseconds)."""
+        h = x
+        derivatives = []
+        for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
+            z = W @ h + b
+            a = 1.0 + np.abs(z)
+            h = z / a
+            derivatives.append(1.0 / (a * a))
+        w_last = self._W64[-1][0]
+        g = w_last
+        for W, d in zip(reversed(self._W64[:-1]), reversed(derivatives), strict=True):
+            g = (g * d) @ W
+        return float(w_last @ h + self._b64[-1][0]), g
+
+    def grad(self, lam: np.ndarray) -> np.ndarray:
+        """dm_l/dlambda [m per lambda unit]: (47,) or (N, 47)."""
+        return self.value_and_grad(lam)[1]
+
+    def out_of_distribution(self, lam: np.ndarray) -> bool | np.ndarray:
+        """True where some entry of lambda is outside the range seen in the training split.
+
+        The network's error grows quickly outside the sampled ranges (seed 000 Fig. 3); contact flags
+        are binary and always in range.
+        """
+        x = check_lambda(lam)
+        low, high = self.params.lam_low, self.params.lam_high
+        outside = (x < low) | (x > high)
+        outside[..., _CONTACTS] = False
+        result = outside.any(axis=-1)
+        return bool(result) if x.ndim == 1 else result
+
+    # ------------------------------------------------------------------ torch and ONNX
+    def torch_module(self, dtype: object = None):
+        """The network as a ``torch.nn.Module`` mapping raw lambda (..., 47) to m_l (...) [m]."""
+        from margin_rl.stability.margin_mlp import MarginMLP
+
+        return MarginMLP.from_weights(self.params, dtype=dtype)
+
+    def export_onnx(self, path: str | Path) -> Path:
+        """Export the network (raw lambda (N, 47) -> m_l (N,)) to ONNX, opset 17."""
+        import torch
+
+        module = self.torch_module(torch.float32).eval()
+        path = Path(path)
+        example = torch.zeros(1, LAMBDA_DIM, dtype=torch.float32)
+        torch.onnx.export(
+            module,
+            (example,),
+            str(path),
+            input_names=["lam"],
+            output_names=["margin"],
+            dynamic_axes={"lam": {0: "batch"}, "margin": {0: "batch"}},
+            opset_version=17,
+            dynamo=False,
+        )
+        return path

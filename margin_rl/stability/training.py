@@ -1,0 +1,361 @@
+"""Train the learned stability margin on an analytic-margin dataset (seed 000 §IV-A).
+
+Command line::
+
+    python -m margin_rl.stability.training --data data/anymal_c --out margin_rl/stability/weights/anymal_c \\
+        [--epochs 200 --batch-size 1024 --lr 1e-3 --patience 10 --seed 0 --logdir runs/margin]
+
+Only samples whose analytic status is ``ok`` are used (the dataset loader counts and drops the rest).
+The split is seeded (train / validation / test); the input normalisation and the output scaling are
+fitted on the training split and stored with the weights. Adam on the mean squared error of the
+normalised margin, learning rate halved on validation plateaus, early stopping on the validation
+loss (the best epoch is kept). TensorBoard logs go to ``--logdir``. The model card records the
+dataset and its generation command, the analytic settings, the package commit, this command and the
+held-out test metrics:
+
+* RMSE of m_l vs m_a overall and per band of |c_ddot_xy| and per number of contacts [cm];
+* sign agreement (stable m >= 0 vs unstable), true positive and true negative rates;
+* median cosine similarity between dm_l/dlambda and central finite differences of m_a.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from margin_rl.dataset import Dataset, load_dataset
+from margin_rl.robot import load_robot
+from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
+from margin_rl.stability.lambda_state import LAMBDA_SLICES, lambda_names
+from margin_rl.stability.learned import LearnedMargin, save_weights
+from margin_rl.stability.margin_mlp import MarginMLP
+
+ACC_BANDS: tuple[tuple[float, float], ...] = ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, np.inf))
+"""Bands of |c_ddot_xy| [m/s^2] for the per-band error (the paper: < 1 cm for |c_ddot_x,y| <= 2)."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Hyperparameters of the margin MLP training."""
+
+    epochs: int = 200
+    batch_size: int = 1024
+    lr: float = 1e-3
+    patience: int = 10  # epochs without validation improvement before stopping
+    lr_patience: int = 3  # epochs without improvement before halving the learning rate
+    val_fraction: float = 0.05
+    test_fraction: float = 0.05
+    seed: int = 0
+    max_samples: int | None = None
+    grad_check_states: int = 200
+
+
+@dataclass(frozen=True)
+class Split:
+    train: np.ndarray
+    val: np.ndarray
+    test: np.ndarray
+
+
+def split_indices(n: int, config: TrainConfig) -> Split:
+    """Seeded random split into train / validation / test indices."""
+    perm = np.random.default_rng(config.seed).permutation(n)
+    n_test = max(1, round(config.test_fraction * n))
+    n_val = max(1, round(config.val_fraction * n))
+    return Split(train=perm[n_test + n_val :], val=perm[n_test : n_test + n_val], test=perm[:n_test])
+
+
+def build_model(lam_train: np.ndarray, margin_train: np.ndarray) -> MarginMLP:
+    """A fresh MLP whose normalisation is fitted on the training split."""
+    std = lam_train.std(axis=0)
+    return MarginMLP(
+        input_mean=lam_train.mean(axis=0),
+        input_std=np.where(std > 1e-8, std, 1.0),
+        output_mean=float(margin_train.mean()),
+        output_std=float(margin_train.std()),
+        lam_low=lam_train.min(axis=0),
+        lam_high=lam_train.max(axis=0),
+    )
+
+
+def _evaluate(model: MarginMLP, lam: torch.Tensor, margin: torch.Tensor, batch: int = 65536) -> float:
+    """Mean squared error [m^2] of the model on a split."""
+    model.eval()
+    total = 0.0
+    with torch.no_grad():
+        for i in range(0, len(lam), batch):
+            total += float(((model(lam[i : i + batch]) - margin[i : i + batch]) ** 2).sum())
+    return total / max(len(lam), 1)
+
+
+def fit(
+    model: MarginMLP,
+    lam_train: np.ndarray,
+    margin_train: np.ndarray,
+    lam_val: np.ndarray,
+    margin_val: np.ndarray,
+    config: TrainConfig,
+    logdir: str | Path | None = None,
+    progress: bool = True,
+) -> dict[str, object]:
+    """Adam + plateau LR decay + early stopping; the model ends with its best validation weights."""
+    torch.manual_seed(config.seed)
+    generator = torch.Generator().manual_seed(config.seed)
+    x, y = torch.as_tensor(lam_train, dtype=torch.float32), torch.as_tensor(margin_train, dtype=torch.float32)
+    xv, yv = torch.as_tensor(lam_val, dtype=torch.float32), torch.as_tensor(margin_val, dtype=torch.float32)
+    mean, std = model.input_mean, model.input_std
+    x_norm = (x - mean) / std  # normalise once; the loss is on the normalised output
+    y_norm = (y - model.output_scale[0]) / model.output_scale[1]
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(optimizer, factor=0.5, patience=config.lr_patience)
+    writer = None
+    if logdir is not None:
+        from torch.utils.tensorboard import SummaryWriter
+
+        writer = SummaryWriter(str(logdir))
+    best, best_state, best_epoch, history = np.inf, None, -1, []
+    t0 = time.perf_counter()
+    for epoch in range(config.epochs):
+        model.train()
+        order = torch.randperm(len(x_norm), generator=generator)
+        running = 0.0
+        for i in range(0, len(order), config.batch_size):
+            idx = order[i : i + config.batch_size]
+            loss = torch.mean((model.normalized_forward(x_norm[idx]) - y_norm[idx]) ** 2)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            running += float(loss.detach()) * len(idx)
+        train_mse = running / len(order) * float(model.output_scale[1]) ** 2
+        val_mse = _evaluate(model, xv, yv)
+        scheduler.step(val_mse)
+        lr = optimizer.param_groups[0]["lr"]
+        history.append({"epoch": epoch, "train_rmse_cm": 100 * train_mse**0.5, "val_rmse_cm": 100 * val_mse**0.5})
+        if writer is not None:
+            writer.add_scalar("loss/train_mse", train_mse, epoch)
+            writer.add_scalar("loss/val_mse", val_mse, epoch)
+            writer.add_scalar("metrics/val_rmse_cm", 100 * val_mse**0.5, epoch)
+            writer.add_scalar("optim/lr", lr, epoch)
+        if progress:
+            print(
+                f"epoch {epoch:3d}  train rmse {100 * train_mse**0.5:.3f} cm  val rmse {100 * val_mse**0.5:.3f} cm"
+                f"  lr {lr:.1e}  {time.perf_counter() - t0:.0f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+        if val_mse < best:
+            best, best_epoch = val_mse, epoch
+            best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        elif epoch - best_epoch >= config.patience:
+            break
+    if best_state is not None:
+        model.load_state_dict(best_state)
+    if writer is not None:
+        writer.close()
+    return {
+        "epochs_run": len(history),
+        "best_epoch": best_epoch,
+        "best_val_rmse_cm": 100 * float(best) ** 0.5,
+        "train_seconds": time.perf_counter() - t0,
+    }
+
+
+def test_metrics(model: LearnedMargin, lam: np.ndarray, margin: np.ndarray) -> dict[str, object]:
+    """Held-out metrics: RMSE overall, per |c_ddot_xy| band and per contact count; sign agreement."""
+    pred = np.asarray(model(lam))
+    err = pred - margin
+    acc_xy = np.linalg.norm(lam[:, LAMBDA_SLICES["com_acc"]][:, :2], axis=1)
+    n_contacts = lam[:, LAMBDA_SLICES["contacts"]].sum(axis=1).round().astype(int)
+    stable, stable_pred = margin >= 0, pred >= 0
+    bands = {}
+    for lo, hi in ACC_BANDS:
+        sel = (acc_xy >= lo) & (acc_xy < hi)
+        if sel.any():
+            bands[f"{lo:g}-{hi:g}"] = {"n": int(sel.sum()), "rmse_cm": 100 * float(np.sqrt(np.mean(err[sel] ** 2)))}
+    by_contacts = {
+        str(k): {"n": int((n_contacts == k).sum()), "rmse_cm": 100 * float(np.sqrt(np.mean(err[n_contacts == k] ** 2)))}
+        for k in (4, 3, 2)
+        if (n_contacts == k).any()
+    }
+    return {
+        "n": len(margin),
+        "rmse_cm": 100 * float(np.sqrt(np.mean(err**2))),
+        "mae_cm": 100 * float(np.mean(np.abs(err))),
+        "rmse_cm_by_acc_xy_band": bands,
+        "rmse_cm_by_contacts": by_contacts,
+        "sign_agreement": float(np.mean(stable == stable_pred)),
+        "true_positive_rate": float(np.mean(stable_pred[stable])) if stable.any() else float("nan"),
+        "true_negative_rate": float(np.mean(~stable_pred[~stable])) if (~stable).any() else float("nan"),
+        "stable_fraction": float(np.mean(stable)),
+    }
+
+
+def finite_difference_steps(input_std: np.ndarray) -> np.ndarray:
+    """Central-difference step per lambda entry: 2 % of its training spread (smaller for e_g, kept unit)."""
+    h = 0.02 * np.asarray(input_std, dtype=float)
+    h[LAMBDA_SLICES["gravity_axis"]] = np.minimum(h[LAMBDA_SLICES["gravity_axis"]], 2e-4)
+    return h
+
+
+def gradient_check(
+    model: LearnedMargin, robot_name: str, lam: np.ndarray, settings: AnalyticSettings, workers: int | None = None
+) -> dict[str, object]:
+    """Cosine similarity of dm_l/dlambda with central finite differences of m_a (2 x 43 analytic calls each).
+
+    Contact flags are binary and skipped; an entry is used only when both perturbed states are ``ok``.
+    The analytic margins are computed with a tight focus bracket so that bracket noise stays far below
+    the finite-difference signal.
+    """
+    steps = finite_difference_steps(model.params.input_std)
+    contacts = set(range(LAMBDA_SLICES["contacts"].start, LAMBDA_SLICES["contacts"].stop))
+    dims = [j for j in range(lam.shape[1]) if j not in contacts]
+    plus = np.repeat(lam[:, None, :], len(dims), axis=1).astype(np.float64)
+    minus = plus.copy()
+    for k, j in enumerate(dims):
+        plus[:, k, j] += steps[j]
+        minus[:, k, j] -= steps[j]
+    both = np.concatenate([plus.reshape(-1, lam.shape[1]), minus.reshape(-1, lam.shape[1])])
+    labels = analytic_margin_batch(robot_name, both, settings, workers=workers)
+    ok = labels.status == STATUSES.index("ok")
+    m = labels.margin.reshape(2, len(lam), len(dims))
+    ok = ok.reshape(2, len(lam), len(dims)).all(axis=0)
+    fd = (m[0] - m[1]) / (2 * steps[dims])
+    learned = model.grad(lam.astype(np.float64))[:, dims]
+    cosines = []
+    for i in range(len(lam)):
+        a, b = learned[i][ok[i]], fd[i][ok[i]]
+        if len(a) >= len(dims) // 2 and np.linalg.norm(a) > 0 and np.linalg.norm(b) > 0:
+            cosines.append(float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b))))
+    cos = np.asarray(cosines)
+    return {
+        "n_states": len(cos),
+        "analytic_calls": len(both),
+        "median_cosine": float(np.median(cos)) if len(cos) else float("nan"),
+        "p10_cosine": float(np.percentile(cos, 10)) if len(cos) else float("nan"),
+        "fraction_above_0.9": float(np.mean(cos >= 0.9)) if len(cos) else float("nan"),
+        "step": {name: float(s) for name, s in zip(lambda_names(), steps, strict=True) if s > 0},
+    }
+
+
+def _git_commit() -> str:
+    try:
+        root = Path(__file__).resolve().parents[2]
+        sha = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, check=True)
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        return sha.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def train(
+    data: str | Path,
+    out: str | Path,
+    config: TrainConfig,
+    logdir: str | Path | None = None,
+    command: str = "",
+    progress: bool = True,
+) -> dict[str, object]:
+    """Train on ``data`` and write ``<out>.npz`` + ``<out>.json``; returns the model card."""
+    ds: Dataset = load_dataset(data, max_samples=config.max_samples)
+    lam, margin = ds.lam.astype(np.float64), ds.margin.astype(np.float64)
+    split = split_indices(len(lam), config)
+    model = build_model(lam[split.train], margin[split.train])
+    summary = fit(
+        model, lam[split.train], margin[split.train], lam[split.val], margin[split.val], config, logdir, progress
+    )
+    weights = model.to_weights()
+    learned = LearnedMargin(weights)
+    metrics = test_metrics(learned, lam[split.test], margin[split.test])
+    manifest = ds.manifest
+    robot = str(manifest["robot"])
+    settings_dict = dict(manifest["analytic_settings"])  # type: ignore[arg-type]
+    grad = {}
+    if config.grad_check_states > 0:
+        settings = AnalyticSettings(
+            friction=tuple(settings_dict["friction"])
+            if isinstance(settings_dict["friction"], list)  # type: ignore[arg-type]
+            else settings_dict["friction"],  # type: ignore[arg-type]
+            focus_tol=1e-5,
+        )
+        rng = np.random.default_rng(config.seed + 1)
+        pick = rng.choice(split.test, size=min(config.grad_check_states, len(split.test)), replace=False)
+        grad = gradient_check(learned, robot, lam[pick], settings)
+    card = {
+        "robot": robot,
+        "description": "learned stability margin m_l(lambda) [m] of seed 000 §IV (47-256-128-128-1, softsign)",
+        "dataset": {
+            "path": str(data),
+            "samples_total": int(sum(ds.counts.values())),
+            "status_counts": ds.counts,
+            "samples_used": len(lam),
+            "split": {"train": len(split.train), "val": len(split.val), "test": len(split.test)},
+            "generation_command": manifest.get("command"),
+            "sampler_version": manifest.get("sampler_version"),
+            "seed": manifest.get("seed"),
+            "package_version": manifest.get("package_version"),
+        },
+        "analytic_settings": settings_dict,
+        "package_commit": _git_commit(),
+        "training_command": command,
+        "training": {**config.__dict__, **summary},
+        "test_metrics": metrics,
+        "gradient_check": grad,
+        "robot_mass_kg": load_robot(robot).total_mass,
+    }
+    return save_weights(weights, out, card)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m margin_rl.stability.training", description=__doc__.split("\n\n")[0]
+    )
+    parser.add_argument("--data", required=True, help="dataset directory (python -m margin_rl.dataset generate)")
+    parser.add_argument("--out", required=True, help="output path without suffix: writes <out>.npz and <out>.json")
+    defaults = TrainConfig()
+    parser.add_argument("--epochs", type=int, default=defaults.epochs)
+    parser.add_argument("--batch-size", type=int, default=defaults.batch_size)
+    parser.add_argument("--lr", type=float, default=defaults.lr)
+    parser.add_argument("--patience", type=int, default=defaults.patience)
+    parser.add_argument("--seed", type=int, default=defaults.seed)
+    parser.add_argument("--max-samples", type=int, default=None)
+    parser.add_argument("--grad-check-states", type=int, default=defaults.grad_check_states)
+    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    parser.add_argument("--logdir", default=None, help="TensorBoard directory")
+    parser.add_argument("--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    config = TrainConfig(
+        epochs=args.epochs,
+        batch_size=args.batch_size,
+        lr=args.lr,
+        patience=args.patience,
+        seed=args.seed,
+        max_samples=args.max_samples,
+        grad_check_states=args.grad_check_states,
+    )
+    command = "python -m margin_rl.stability.training " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
+    card = train(args.data, args.out, config, args.logdir, command, progress=not args.quiet)
+    m = card["test_metrics"]
+    print(
+        f"test RMSE {m['rmse_cm']:.3f} cm, sign agreement {m['sign_agreement']:.3%}, "
+        f"gradient cosine median {card['gradient_check'].get('median_cosine', float('nan')):.3f}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,195 @@
+"""Learned margin inference: numpy vs torch vs ONNX, exact gradients, OOD mask, safe loading."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from margin_rl.stability.lambda_state import LAMBDA_SLICES
+from margin_rl.stability.learned import (
+    ARCHITECTURE,
+    LearnedMargin,
+    MarginWeights,
+    WeightsError,
+    bundled_robots,
+    save_weights,
+)
+from margin_rl.stability.margin_mlp import MarginMLP
+
+
+def random_weights(seed: int = 0) -> MarginWeights:
+    rng = np.random.default_rng(seed)
+    widths = ARCHITECTURE
+    return MarginWeights(
+        weights=tuple(rng.normal(0, 1 / np.sqrt(widths[i]), (widths[i + 1], widths[i])) for i in range(4)),
+        biases=tuple(rng.normal(0, 0.1, widths[i + 1]) for i in range(4)),
+        input_mean=rng.normal(size=47),
+        input_std=rng.uniform(0.5, 2.0, 47),
+        output_mean=-0.1,
+        output_std=0.15,
+        lam_low=-np.full(47, 3.0),
+        lam_high=np.full(47, 3.0),
+    )
+
+
+@pytest.fixture(scope="module")
+def saved(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("weights") / "toy"
+    save_weights(random_weights(), path, {"robot": "toy"})
+    return path.with_suffix(".npz")
+
+
+@pytest.fixture(scope="module")
+def model(saved: Path) -> LearnedMargin:
+    return LearnedMargin.load(saved)
+
+
+def test_single_batch_and_torch_agree(model: LearnedMargin) -> None:
+    lam = np.random.default_rng(1).normal(size=(64, 47))
+    batch = model(lam)
+    single = np.array([model(x) for x in lam])
+    np.testing.assert_allclose(batch, single, rtol=1e-5, atol=1e-6)  # float32 batch path
+    module = model.torch_module(torch.float64)
+    with torch.no_grad():
+        torch_out = module(torch.as_tensor(lam)).numpy()
+    np.testing.assert_allclose(single, torch_out, atol=1e-10)
+    assert isinstance(single[0], float)
+
+
+def test_gradient_is_exact(model: LearnedMargin) -> None:
+    lam = np.random.default_rng(2).normal(size=(5, 47))
+    value, grad = model.value_and_grad(lam)
+    module = model.torch_module(torch.float64)
+    x = torch.tensor(lam, requires_grad=True)
+    module(x).sum().backward()
+    np.testing.assert_allclose(grad, x.grad.numpy(), atol=1e-10)
+    np.testing.assert_allclose(value, model(lam), atol=1e-5)
+    # Independent check: central differences of the numpy forward pass.
+    h = 1e-6
+    for j in (0, 20, 46):
+        e = np.zeros(47)
+        e[j] = h
+        fd = (model(lam[0] + e) - model(lam[0] - e)) / (2 * h)
+        assert fd == pytest.approx(grad[0, j], abs=1e-6)
+    v1, g1 = model.value_and_grad(lam[3])
+    assert v1 == pytest.approx(value[3]) and g1.shape == (47,)
+    np.testing.assert_allclose(model.grad(lam[3]), grad[3])
+
+
+def test_out_of_distribution_mask(model: LearnedMargin) -> None:
+    lam = np.zeros((3, 47))
+    lam[1, 5] = 10.0  # outside [-3, 3]
+    lam[2, LAMBDA_SLICES["contacts"].start] = 10.0  # contact flags are never out of range
+    assert model.out_of_distribution(lam).tolist() == [False, True, False]
+    assert model.out_of_distribution(lam[1]) is True
+
+
+def test_save_load_round_trip_and_card(saved: Path, model: LearnedMargin) -> None:
+    card = json.loads(saved.with_suffix(".json").read_text())
+    assert card["architecture"] == list(ARCHITECTURE) and card["activation"] == "softsign"
+    assert len(card["lambda_names"]) == 47 and card["robot"] == "toy"
+    module = MarginMLP.from_weights(model.params)
+    again = LearnedMargin(module.to_weights())
+    lam = np.random.default_rng(3).normal(size=47)
+    assert again(lam) == pytest.approx(model(lam), abs=1e-6)
+
+
+def test_bad_inputs(model: LearnedMargin) -> None:
+    with pytest.raises(ValueError, match="shape"):
+        model(np.zeros(46))
+    lam = np.zeros(47)
+    lam[LAMBDA_SLICES["mu"]] = np.nan
+    with pytest.raises(ValueError, match="mu"):
+        model(lam)
+    with pytest.raises(ValueError, match="shape"):
+        model(np.zeros((2, 3, 47)))
+
+
+def test_unknown_robot_lists_bundled() -> None:
+    with pytest.raises(WeightsError, match="no learned margin for robot 'anymal_x'"):
+        LearnedMargin.load("anymal_x")
+
+
+def test_corrupted_and_mismatched_files_are_refused(saved: Path, tmp_path: Path) -> None:
+    npz, card = tmp_path / "w.npz", tmp_path / "w.json"
+    data = bytearray(saved.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    npz.write_bytes(bytes(data))
+    card.write_text(saved.with_suffix(".json").read_text())
+    with pytest.raises(WeightsError, match="checksum mismatch"):
+        LearnedMargin.load(npz)
+    npz.write_bytes(saved.read_bytes())
+    meta = json.loads(card.read_text())
+    meta["lambda_layout"] = "0123456789abcdef"
+    card.write_text(json.dumps(meta))
+    with pytest.raises(WeightsError, match="another lambda layout"):
+        LearnedMargin.load(npz)
+    card.unlink()
+    with pytest.raises(WeightsError, match="model card not found"):
+        LearnedMargin.load(npz)
+    with pytest.raises(WeightsError, match="not found"):
+        LearnedMargin.load(tmp_path / "missing.npz")
+
+
+def test_wrong_architecture_is_refused() -> None:
+    w = random_weights()
+    bad = MarginWeights(**{**w.__dict__, "weights": (w.weights[0][:100], *w.weights[1:])})
+    with pytest.raises(WeightsError, match=r"layer widths|bias"):
+        bad.validate()
+
+
+def test_onnx_export_matches(model: LearnedMargin, tmp_path: Path) -> None:
+    ort = pytest.importorskip("onnxruntime")
+    path = model.export_onnx(tmp_path / "margin.onnx")
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    lam = np.random.default_rng(4).normal(size=(7, 47)).astype(np.float32)
+    (out,) = session.run(None, {"lam": lam})
+    np.testing.assert_allclose(out, model(lam.astype(np.float64)), atol=1e-5)
+
+
+@pytest.mark.parametrize("robot", bundled_robots())
+def test_bundled_weights_load_and_track_the_analytic_margin(robot: str) -> None:
+    from margin_rl import load_robot
+    from margin_rl.stability.analytic import analytic_margin
+    from margin_rl.stability.sampling import sample_states
+
+    model = LearnedMargin.load(robot)
+    assert model.card["robot"] == robot
+    robot_model = load_robot(robot)
+    lams = sample_states(robot_model, 60, seed=123)
+    analytic = np.array([analytic_margin(robot_model, lam).margin for lam in lams])
+    ok = np.isfinite(analytic)
+    err = np.asarray(model(lams))[ok] - analytic[ok]
+    # Loose bound: the card's test RMSE is the real figure; this guards against wrong weights.
+    assert np.sqrt(np.mean(err**2)) < 3 * model.card["test_metrics"]["rmse_cm"] / 100 + 0.01
+
+
+def test_training_end_to_end_writes_a_complete_card(tmp_path: Path) -> None:
+    from margin_rl.dataset import DatasetSpec, generate
+    from margin_rl.stability.analytic import AnalyticSettings
+    from margin_rl.stability.training import TrainConfig, train
+
+    data = tmp_path / "data"
+    generate(DatasetSpec("anymal_b", 120, 60, 0, AnalyticSettings()), data, workers=1, progress=False)
+    card = train(
+        data, tmp_path / "w", TrainConfig(epochs=2, grad_check_states=2), logdir=tmp_path / "tb", progress=False
+    )
+    for key in (
+        "dataset",
+        "analytic_settings",
+        "package_commit",
+        "training",
+        "test_metrics",
+        "gradient_check",
+        "sha256",
+    ):
+        assert key in card, key
+    assert "margin_rl.dataset generate --robot anymal_b --n 120" in card["dataset"]["generation_command"]
+    assert set(card["test_metrics"]) >= {"rmse_cm", "sign_agreement", "rmse_cm_by_acc_xy_band"}
+    assert list((tmp_path / "tb").iterdir()), "no TensorBoard events"
+    model = LearnedMargin.load(tmp_path / "w.npz")
+    assert np.isfinite(model(np.zeros(47)))

@@ -1,0 +1,128 @@
+"""Dataset generation: sharded, atomic, resumable, worker-count independent, refuses mixing settings."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from margin_rl.dataset import DatasetError, DatasetSpec, generate, load_dataset, main, shard_path
+from margin_rl.robot import load_robot
+from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin
+
+SPEC = DatasetSpec(robot="anymal_b", n=50, shard_size=20, seed=3, settings=AnalyticSettings())
+
+
+def shards(path: Path) -> list[Path]:
+    return sorted(path.glob("shard_*.npz"))
+
+
+def test_generate_resume_and_labels(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    counts = generate(SPEC, out, workers=1, progress=False)
+    assert sum(counts.values()) == 50 and len(shards(out)) == 3
+    assert not list(out.glob(".*tmp")), "temporary files left behind"
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["robot"] == "anymal_b" and manifest["sampler_version"] >= 1 and manifest["seed"] == 3
+    assert manifest["package_version"] and manifest["analytic_settings"]["friction"] == "cone"
+    # Labels are the analytic margins of the stored states.
+    robot = load_robot("anymal_b")
+    with np.load(shard_path(out, 0)) as data:
+        lam, margin, status = data["lam"], data["margin"], data["status"]
+    for i in range(5):
+        result = analytic_margin(robot, lam[i].astype(np.float64))
+        assert STATUSES[status[i]] == result.status
+        if result.status == "ok":
+            assert margin[i] == pytest.approx(result.margin, abs=2e-4)  # lambda stored as float32
+    # A rerun skips finished shards (files untouched) and reports nothing new.
+    mtimes = [p.stat().st_mtime_ns for p in shards(out)]
+    again = generate(SPEC, out, workers=1, progress=False)
+    assert sum(again.values()) == 0 and [p.stat().st_mtime_ns for p in shards(out)] == mtimes
+
+
+def test_lost_and_truncated_shards_are_remade_identically(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    generate(SPEC, out, workers=2, progress=False)
+    reference = tmp_path / "reference.npz"
+    reference.write_bytes(shard_path(out, 1).read_bytes())
+    shard_path(out, 1).unlink()
+    shard_path(out, 2).write_bytes(b"truncated")
+    counts = generate(SPEC, out, workers=1, progress=False)
+    assert sum(counts.values()) == 20 + 10
+    # Each shard has its own seed, so it is remade identically whatever the number of workers.
+    with np.load(shard_path(out, 1)) as remade, np.load(reference) as original:
+        np.testing.assert_array_equal(remade["lam"], original["lam"])
+        np.testing.assert_array_equal(remade["margin"], original["margin"])
+
+
+def test_other_settings_are_refused(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    generate(SPEC, out, workers=1, progress=False)
+    other = DatasetSpec(robot="anymal_b", n=50, shard_size=20, seed=4, settings=AnalyticSettings())
+    with pytest.raises(DatasetError, match="seed"):
+        generate(other, out, workers=1, progress=False)
+    smaller = DatasetSpec(robot="anymal_b", n=30, shard_size=20, seed=3, settings=AnalyticSettings())
+    with pytest.raises(DatasetError, match="at least"):
+        generate(smaller, out, workers=1, progress=False)
+    bigger = DatasetSpec(robot="anymal_b", n=60, shard_size=20, seed=3, settings=AnalyticSettings())
+    counts = generate(bigger, out, workers=1, progress=False)
+    assert sum(counts.values()) == 20  # the partial last shard is remade at full length
+    assert sum(load_dataset(out).counts.values()) == 60
+
+
+def test_load_dataset_keeps_ok_and_counts_the_rest(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    generate(SPEC, out, workers=1, progress=False)
+    ds = load_dataset(out)
+    assert sum(ds.counts.values()) == 50
+    assert len(ds.lam) == ds.counts["ok"] == len(ds.margin)
+    assert np.all(np.isfinite(ds.margin))
+    with pytest.raises(DatasetError, match="not a margin_rl dataset"):
+        load_dataset(tmp_path)
+
+
+def test_bad_requests(tmp_path: Path) -> None:
+    with pytest.raises(DatasetError, match="unknown robot"):
+        generate(DatasetSpec("anymal_x", 10, 5, 0, AnalyticSettings()), tmp_path / "a", progress=False)
+    with pytest.raises(DatasetError, match="positive"):
+        generate(DatasetSpec("anymal_b", 0, 5, 0, AnalyticSettings()), tmp_path / "b", progress=False)
+
+
+def test_cli_generate_and_summary(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "cli"
+    assert (
+        main(
+            [
+                "generate",
+                "--robot",
+                "anymal_c",
+                "--n",
+                "12",
+                "--shard-size",
+                "6",
+                "--out",
+                str(out),
+                "--workers",
+                "1",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert main(["summary", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "12 samples" in text and "anymal_c" in text
+
+
+@pytest.mark.slow
+def test_ray_path_with_a_local_instance(tmp_path: Path) -> None:
+    pytest.importorskip("ray")
+    out_ray, out_local = tmp_path / "ray", tmp_path / "local"
+    generate(SPEC, out_ray, ray_address="local", progress=False)
+    generate(SPEC, out_local, workers=1, progress=False)
+    for a, b in zip(shards(out_ray), shards(out_local), strict=True):
+        with np.load(a) as x, np.load(b) as y:
+            np.testing.assert_array_equal(x["lam"], y["lam"])
+            np.testing.assert_array_equal(x["status"], y["status"])

@@ -12,14 +12,23 @@ STAMP := $(VENV)/.margin_rl-installed
 export PIP_NO_INPUT := 1
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 export GIT_PYTHON_REFRESH := quiet
+# Headless rendering (videos, rgb_array) through Mesa's EGL; override with MUJOCO_GL=osmesa if preferred.
+export MUJOCO_GL ?= egl
 
-.PHONY: install demo test lint clean
+.PHONY: install demo test lint clean gl-deps
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 
-$(STAMP): $(PY) pyproject.toml
+# Mesa's EGL for headless rendering; best effort (rendering tests skip without it).
+gl-deps:
+	@ldconfig -p | grep -q libEGL_mesa || { \
+	  command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ] && \
+	  (apt-get update -qq && apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri) \
+	  || echo "note: install libegl1 libegl-mesa0 libgl1-mesa-dri for headless rendering"; }
+
+$(STAMP): $(PY) pyproject.toml | gl-deps
 	$(PY) -m pip install -q "$(TORCH_SPEC)"
 	$(PY) -m pip install -q -e ".[dev]"
 	touch $(STAMP)

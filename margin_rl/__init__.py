@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
 
+from margin_rl import envs as _envs  # noqa: F401 - registers the Gymnasium ids
 from margin_rl.robot import Robot, available_robots, load_robot
 
 try:

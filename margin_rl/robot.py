@@ -75,14 +75,16 @@ def scene_xml_path(name: str) -> Path:
 
 
 def quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) of a unit quaternion given as (w, x, y, z)."""
-    w, x, y, z = np.asarray(quat_wxyz, dtype=float) / np.linalg.norm(quat_wxyz)
-    return np.array(
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) given as (w, x, y, z) (normalised here)."""
+    q = np.asarray(quat_wxyz, dtype=float)
+    w, x, y, z = np.moveaxis(q / np.linalg.norm(q, axis=-1, keepdims=True), -1, 0)
+    return np.stack(
         [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=-2,
     )
 
 

@@ -1,0 +1,73 @@
+"""The observation layout, declared once: names, sizes, scales and noise levels.
+
+The policy observation is the concatenation of :data:`POLICY_OBSERVATIONS` in order, each multiplied by
+its scale (legged_gym's normalisation) and perturbed by uniform noise of half-width
+``noise * scale * RandomizationConfig.observation_noise``. Frames: velocities in the base frame,
+gravity projected into the base frame, joint positions relative to the standing keyframe.
+:data:`PRIVILEGED_OBSERVATIONS` is the optional critic group.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class ObservationTerm:
+    name: str
+    size: int
+    scale: float
+    noise: float  # uniform half-width before scaling, in the term's units
+    description: str
+
+
+POLICY_OBSERVATIONS: tuple[ObservationTerm, ...] = (
+    ObservationTerm("base_lin_vel", 3, 2.0, 0.1, "base linear velocity, base frame [m/s]"),
+    ObservationTerm("base_ang_vel", 3, 0.25, 0.2, "base angular velocity, base frame [rad/s]"),
+    ObservationTerm("projected_gravity", 3, 1.0, 0.05, "unit gravity direction in the base frame"),
+    ObservationTerm("command", 3, 2.0, 0.0, "command: forward, lateral velocity [m/s], yaw rate [rad/s]"),
+    ObservationTerm("joint_pos", 12, 1.0, 0.01, "joint angles minus the standing keyframe [rad]"),
+    ObservationTerm("joint_vel", 12, 0.05, 1.5, "joint velocities [rad/s]"),
+    ObservationTerm("last_action", 12, 1.0, 0.0, "previous action"),
+)
+
+FOOT_HEIGHT_OFFSETS: tuple[tuple[float, float], ...] = tuple(
+    (dx, dy) for dx in (-0.1, 0.0, 0.1) for dy in (-0.1, 0.0, 0.1)
+)
+"""Horizontal offsets [m] around each foot where the privileged group samples the terrain height."""
+
+PRIVILEGED_OBSERVATIONS: tuple[ObservationTerm, ...] = (
+    ObservationTerm(
+        "foot_terrain_heights",
+        4 * len(FOOT_HEIGHT_OFFSETS),
+        5.0,
+        0.0,
+        "foot height above the terrain at 3x3 points around each foot [m]",
+    ),
+    ObservationTerm("friction", 1, 1.0, 0.0, "terrain friction coefficient"),
+    ObservationTerm("margin", 1, 10.0, 0.0, "stability margin of the current state [m]"),
+)
+
+
+def observation_structure(terms: tuple[ObservationTerm, ...] = POLICY_OBSERVATIONS) -> dict[str, int]:
+    """Name -> size, in order (Gymnasium's ``observation_structure``)."""
+    return {t.name: t.size for t in terms}
+
+
+def observation_size(terms: tuple[ObservationTerm, ...] = POLICY_OBSERVATIONS) -> int:
+    return sum(t.size for t in terms)
+
+
+def assemble(
+    values: dict[str, np.ndarray], terms: tuple[ObservationTerm, ...], noise_level: float, rng: np.random.Generator
+) -> np.ndarray:
+    """Concatenate scaled (and optionally noisy) terms: values[name] has shape (N, size) -> (N, total)."""
+    parts = []
+    for t in terms:
+        v = np.asarray(values[t.name], dtype=np.float64).reshape(-1, t.size)
+        if noise_level > 0 and t.noise > 0:
+            v = v + rng.uniform(-1.0, 1.0, size=v.shape) * t.noise * noise_level
+        parts.append(v * t.scale)
+    return np.concatenate(parts, axis=1).astype(np.float32)

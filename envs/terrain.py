@@ -1,0 +1,144 @@
+"""Terrain of the environments: flat ground, or a rough heightfield like seed 000 Fig. 8.
+
+The rough terrain is a square heightfield of tiles, each of one type drawn from the paper's scenes
+(bricks, stairs up and down, inclines, side steps, scattered obstacles), with heights of 6-18 cm as in
+Fig. 5/8, and a flat pad at every tile centre where robots spawn. MuJoCo collides with the same grid
+(an ``hfield`` geom); :meth:`Terrain.height` and :meth:`Terrain.normal` query it in numpy, vectorised,
+for the contact normals in lambda and for spawning.
+
+Grid convention (MuJoCo's): ``heights[r, c]`` is the elevation at x = x0 + c * res, y = y0 + r * res.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+TILE_TYPES: tuple[str, ...] = (
+    "flat",
+    "bricks",
+    "stairs_up",
+    "stairs_down",
+    "slope_up",
+    "slope_down",
+    "side_step",
+    "obstacles",
+)
+
+
+@dataclass(frozen=True)
+class TerrainConfig:
+    """Rough-terrain generator settings (lengths in m)."""
+
+    size: float = 24.0  # side of the square terrain
+    resolution: float = 0.05  # grid spacing
+    tile: float = 4.0  # side of one tile
+    step_height: tuple[float, float] = (0.06, 0.18)  # bricks, stairs, side steps, obstacles (Fig. 8)
+    max_slope_deg: float = 15.0
+    pad: float = 1.0  # side of the flat spawn pad at each tile centre
+    base_level: float = 0.5  # tiles start at this height so that stairs can go down
+    max_height: float = 1.5  # vertical extent of the MuJoCo hfield
+
+
+@dataclass(frozen=True)
+class Terrain:
+    """A height grid with vectorised height/normal queries; ``flat`` terrains are the plane z = 0."""
+
+    heights: np.ndarray | None  # (n, n) [m], None for flat ground
+    origin: tuple[float, float]  # (x0, y0) of heights[0, 0]
+    resolution: float
+    spawn_points: np.ndarray  # (k, 3) flat places to put a robot: x, y, ground height
+
+    @property
+    def is_flat(self) -> bool:
+        return self.heights is None
+
+    def height(self, xy: np.ndarray) -> np.ndarray:
+        """Ground height [m] under points (..., 2), bilinear in the grid (0 for flat ground)."""
+        xy = np.asarray(xy, dtype=float)
+        if self.heights is None:
+            return np.zeros(xy.shape[:-1])
+        n = self.heights.shape[0]
+        u = np.clip((xy[..., 0] - self.origin[0]) / self.resolution, 0, n - 1.000001)
+        v = np.clip((xy[..., 1] - self.origin[1]) / self.resolution, 0, n - 1.000001)
+        c0, r0 = np.floor(u).astype(int), np.floor(v).astype(int)
+        fu, fv = u - c0, v - r0
+        h = self.heights
+        return (
+            h[r0, c0] * (1 - fu) * (1 - fv)
+            + h[r0, c0 + 1] * fu * (1 - fv)
+            + h[r0 + 1, c0] * (1 - fu) * fv
+            + h[r0 + 1, c0 + 1] * fu * fv
+        )
+
+    def normal(self, xy: np.ndarray) -> np.ndarray:
+        """Unit terrain normals (..., 3) under points (..., 2), from central differences of the height."""
+        xy = np.asarray(xy, dtype=float)
+        if self.heights is None:
+            return np.broadcast_to(np.array([0.0, 0.0, 1.0]), (*xy.shape[:-1], 3)).copy()
+        d = self.resolution
+        ex, ey = np.array([d, 0.0]), np.array([0.0, d])
+        dx = (self.height(xy + ex) - self.height(xy - ex)) / (2 * d)
+        dy = (self.height(xy + ey) - self.height(xy - ey)) / (2 * d)
+        n = np.stack([-dx, -dy, np.ones_like(dx)], axis=-1)
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+
+
+def flat_terrain() -> Terrain:
+    return Terrain(heights=None, origin=(0.0, 0.0), resolution=1.0, spawn_points=np.zeros((1, 3)))
+
+
+def rough_terrain(config: TerrainConfig, seed: int) -> Terrain:
+    """Generate a rough terrain; the same (config, seed) gives the same grid."""
+    rng = np.random.default_rng(seed)
+    res = config.resolution
+    n = round(config.size / res) + 1
+    heights = np.full((n, n), config.base_level)
+    tiles = round(config.size / config.tile)
+    per_tile = round(config.tile / res)
+    origin = (-config.size / 2, -config.size / 2)
+    spawns = []
+    types = rng.permutation(np.resize(np.arange(len(TILE_TYPES)), tiles * tiles))
+    for ti in range(tiles):
+        for tj in range(tiles):
+            r0, c0 = ti * per_tile, tj * per_tile
+            block = _tile(TILE_TYPES[types[ti * tiles + tj]], per_tile + 1, res, config, rng)
+            heights[r0 : r0 + per_tile + 1, c0 : c0 + per_tile + 1] = config.base_level + block
+            centre = (origin[0] + (c0 + per_tile / 2) * res, origin[1] + (r0 + per_tile / 2) * res)
+            spawns.append((*centre, config.base_level))
+    heights = np.clip(heights, 0.0, config.max_height)
+    return Terrain(heights=heights, origin=origin, resolution=res, spawn_points=np.array(spawns))
+
+
+def _tile(kind: str, m: int, res: float, config: TerrainConfig, rng: np.random.Generator) -> np.ndarray:
+    """Height offsets (m, m) of one tile relative to the base level, flat pad at the centre."""
+    lo, hi = config.step_height
+    x = (np.arange(m) - (m - 1) / 2) * res  # tile-local coordinate along the grid columns
+    X, Y = np.meshgrid(x, x)  # X varies along columns (world x), Y along rows (world y)
+    pad = (np.abs(X) <= config.pad / 2) & (np.abs(Y) <= config.pad / 2)
+    out = np.zeros((m, m))
+    if kind == "bricks":
+        brick = 0.4
+        cells = np.floor((X + 10) / brick).astype(int) * 1000 + np.floor((Y + 10) / brick).astype(int)
+        values = rng.uniform(0, rng.uniform(lo, hi), size=cells.max() + 1)
+        out = values[cells]
+    elif kind in ("stairs_up", "stairs_down"):
+        step, width = rng.uniform(lo, hi), 0.3
+        levels = np.floor(np.maximum(np.abs(X) - config.pad / 2, 0) / width + (np.abs(X) > config.pad / 2))
+        out = levels * step * (1 if kind == "stairs_up" else -1)
+    elif kind in ("slope_up", "slope_down"):
+        slope = np.tan(np.deg2rad(rng.uniform(5.0, config.max_slope_deg)))
+        out = np.maximum(np.abs(X) - config.pad / 2, 0) * slope * (1 if kind == "slope_up" else -1)
+    elif kind == "side_step":
+        out = np.where(config.pad / 2 < Y, rng.uniform(lo, hi), 0.0)  # left half raised
+    elif kind == "obstacles":
+        for _ in range(12):
+            cx, cy = rng.uniform(-(m - 1) * res / 2, (m - 1) * res / 2, size=2)
+            w, d = rng.uniform(0.2, 0.8, size=2)
+            box = (np.abs(X - cx) <= w / 2) & (np.abs(Y - cy) <= d / 2)
+            out = np.where(box, np.maximum(out, rng.uniform(lo, hi)), out)
+    out = np.where(pad, 0.0, out)
+    # Keep tile borders continuous with neighbours at the base level (a 2-cell ramp-free rim).
+    out[:2, :], out[-2:, :], out[:, :2], out[:, -2:] = 0.0, 0.0, 0.0, 0.0
+    return out

@@ -1,0 +1,258 @@
+"""ANYmal environments: Gymnasium API, reward sum, determinism, batch = single, lambda from the sim."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from margin_rl.envs import ANYMAL_ENV_IDS, EPISODE_STEPS
+from margin_rl.envs.config import EnvConfig, RandomizationConfig
+from margin_rl.envs.core import AnymalCore, heading_rotation, lambda_from_simulation
+from margin_rl.envs.observations import POLICY_OBSERVATIONS, observation_size
+
+import margin_rl
+from margin_rl.robot import quat_wxyz_to_matrix
+from margin_rl.stability.lambda_state import from_lambda
+from tests.stability.test_learned import random_weights
+
+NO_NOISE = RandomizationConfig(reset_joint_noise=0.0, reset_velocity_noise=0.0)
+
+
+@pytest.fixture(scope="module")
+def toy_weights(tmp_path_factory: pytest.TempPathFactory) -> str:
+    from margin_rl.stability.learned import save_weights
+
+    path = tmp_path_factory.mktemp("w") / "toy"
+    save_weights(random_weights(), path, {"robot": "toy"})
+    return str(path.with_suffix(".npz"))
+
+
+@pytest.mark.parametrize("env_id", sorted(ANYMAL_ENV_IDS))
+def test_check_env_on_every_id(env_id: str, toy_weights: str) -> None:
+    env = gym.make(env_id, margin_weights=toy_weights)
+    check_env(env.unwrapped, skip_render_check=True)
+    assert env.spec.max_episode_steps == EPISODE_STEPS == env.unwrapped.core.max_episode_steps
+    assert sum(env.unwrapped.observation_structure.values()) == env.observation_space.shape[0]
+    env.close()
+
+
+def test_reward_is_the_sum_of_the_terms(toy_weights: str) -> None:
+    env = gym.make("margin_rl/AnymalB-v0", reward_preset="shaped", margin_weights=toy_weights)
+    env.reset(seed=1)
+    rng = np.random.default_rng(1)
+    for _ in range(100):
+        _, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, 12))
+        terms = [v for k, v in info.items() if k.startswith("reward_")]
+        assert len(terms) == 12
+        assert reward == pytest.approx(sum(terms), abs=1e-9)
+        for key in ("margin", "base_lin_acc", "base_ang_acc", "contacts", "stance_width"):
+            assert key in info
+        if terminated or truncated:
+            env.reset()
+
+
+def test_paper_preset_has_exactly_two_terms(toy_weights: str) -> None:
+    env = gym.make("margin_rl/AnymalC-v0", margin_weights=toy_weights, margin_weight=0.3)
+    env.reset(seed=0)
+    _, _reward, _, _, info = env.step(np.zeros(12))
+    terms = {k: v for k, v in info.items() if k.startswith("reward_")}
+    assert set(terms) == {"reward_velocity_tracking", "reward_margin"}
+    assert terms["reward_margin"] == pytest.approx(0.3 * info["margin"])
+    # L(8 (0.75 - v)): the logistic kernel of the heading velocity in the base frame.
+    v = info["base_lin_vel"][0]
+    x = 8.0 * (0.75 - v)
+    assert terms["reward_velocity_tracking"] == pytest.approx(1.0 / (np.exp(-x) + 2 + np.exp(x)))
+
+
+def test_same_seed_same_rollout(toy_weights: str) -> None:
+    def rollout(seed: int) -> np.ndarray:
+        env = gym.make(
+            "margin_rl/AnymalC-v0",
+            margin_weights=toy_weights,
+            randomization=RandomizationConfig(observation_noise=1.0, friction=(0.4, 1.0)),
+        )
+        obs, _ = env.reset(seed=seed)
+        out = [obs]
+        rng = np.random.default_rng(0)
+        for _ in range(30):
+            out.append(env.step(rng.uniform(-1, 1, 12))[0])
+        return np.array(out)
+
+    np.testing.assert_array_equal(rollout(3), rollout(3))
+    assert not np.array_equal(rollout(3), rollout(4))
+
+
+def test_batched_env_equals_single_envs_step_for_step(toy_weights: str) -> None:
+    n = 3
+    vec = gym.make_vec(
+        "margin_rl/AnymalB-v0",
+        num_envs=n,
+        vectorization_mode="vector_entry_point",
+        margin_weights=toy_weights,
+        randomization=NO_NOISE,
+    )
+    singles = [gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE) for _ in range(n)]
+    obs_v, _ = vec.reset(seed=0)
+    obs_s = [env.reset(seed=0)[0] for env in singles]
+    np.testing.assert_array_equal(obs_v, np.array(obs_s))
+    rng = np.random.default_rng(2)
+    for _ in range(40):
+        actions = rng.uniform(-0.5, 0.5, (n, 12))
+        obs_v, rew_v, term_v, _, info_v = vec.step(actions)
+        for i, env in enumerate(singles):
+            obs, rew, _term, _, info = env.step(actions[i])
+            if term_v[i]:
+                continue
+            # The physics is bit-identical (mujoco.batch); the learned margin runs in float32, where the
+            # GEMM's rounding depends on the batch size, so margins and rewards agree to float32 precision.
+            np.testing.assert_array_equal(obs_v[i], obs)
+            assert rew_v[i] == pytest.approx(rew, abs=1e-6)
+            assert info_v["margin"][i] == pytest.approx(info["margin"], abs=1e-6)
+
+
+def test_lambda_from_a_known_state_matches_a_hand_computation() -> None:
+    """Yawed, pitched base: e_g is the third row of R; vectors are rotated by the heading yaw only."""
+    yaw, pitch = np.deg2rad(30.0), np.deg2rad(10.0)
+    quat = np.zeros(4)
+    qz, qy = np.zeros(4), np.zeros(4)
+    mujoco.mju_axisAngle2Quat(qz, np.array([0, 0, 1.0]), yaw)
+    mujoco.mju_axisAngle2Quat(qy, np.array([0, 1.0, 0]), pitch)
+    mujoco.mju_mulQuat(quat, qz, qy)
+    R = quat_wxyz_to_matrix(quat)[None]
+    com = np.array([[1.0, 2.0, 0.5]])
+    feet = com[:, None, :] + np.array([[[0.4, 0.3, -0.5], [0.4, -0.3, -0.5], [-0.4, 0.3, -0.5], [-0.4, -0.3, -0.5]]])
+    com_vel = np.array([[np.cos(yaw), np.sin(yaw), 0.0]])  # 1 m/s along the heading
+    lam = lambda_from_simulation(
+        R,
+        com,
+        com_vel,
+        np.zeros((1, 3)),
+        np.zeros((1, 3)),
+        np.array([[0.0, 10.0, 0.0]]),
+        np.zeros((1, 3)),
+        feet,
+        np.array([0.7]),
+        np.ones((1, 4)),
+        np.tile([0, 0, 1.0], (1, 4, 1)),
+    )
+    st = from_lambda(lam[0])
+    # Hand computation: e_g = (-sin pitch, 0, cos pitch); heading velocity (1, 0, 0) in H; feet rotated by -yaw.
+    np.testing.assert_allclose(st.gravity_axis, [-np.sin(pitch), 0.0, np.cos(pitch)], atol=1e-12)
+    np.testing.assert_allclose(st.com_vel, [1.0, 0.0, 0.0], atol=1e-12)
+    c, s = np.cos(-yaw), np.sin(-yaw)
+    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    np.testing.assert_allclose(st.feet, (feet[0] - com[0]) @ rot.T, atol=1e-12)
+    np.testing.assert_allclose(st.ext_force, rot @ [0.0, 10.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(st.normals, np.tile([0, 0, 1.0], (4, 1)), atol=1e-12)
+    assert st.mu == pytest.approx(0.7) and st.contacts.tolist() == [1, 1, 1, 1]
+    np.testing.assert_allclose(heading_rotation(R)[0], rot.T, atol=1e-12)
+
+
+def test_standing_robot_has_a_positive_analytic_margin() -> None:
+    env = gym.make("margin_rl/AnymalC-v0", margin="analytic", randomization=NO_NOISE)
+    env.reset(seed=0)
+    for _ in range(50):  # 1 s: the robot settles from its 2 cm spawn drop
+        _, _, terminated, _, info = env.step(np.zeros(12))
+        assert not terminated
+    assert info["margin"] > 0.1
+    assert info["contacts"].tolist() == [1.0, 1.0, 1.0, 1.0]
+    # The sim's lambda is a kinematically reachable state with the robot's standing feet.
+    lam = env.unwrapped.core.last_lambda[0]
+    st = from_lambda(lam)
+    assert np.all(st.feet[:, 2] < -0.4) and abs(st.com_vel).max() < 0.02
+
+
+def test_actions_nan_raise_and_out_of_range_are_clipped(toy_weights: str) -> None:
+    env_a = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE)
+    env_b = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE)
+    env_a.reset(seed=0)
+    env_b.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env_a.step(np.full(12, np.nan))
+    big = np.full(12, 5.0)
+    np.testing.assert_array_equal(env_a.step(big)[0], env_b.step(np.ones(12))[0])
+
+
+def test_diverging_simulation_terminates_with_a_flag(toy_weights: str) -> None:
+    env = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights)
+    env.reset(seed=0)
+    core: AnymalCore = env.unwrapped.core
+    core._qvel[0, 6:] = 1e9  # an exploding state
+    _, reward, terminated, _, info = env.step(np.zeros(12))
+    assert terminated and info["diverged"] == 1.0 and np.isfinite(reward)
+
+
+def test_vector_env_same_step_autoreset(toy_weights: str) -> None:
+    vec = gym.make_vec(
+        "margin_rl/AnymalB-v0", num_envs=4, vectorization_mode="vector_entry_point", margin_weights=toy_weights
+    )
+    assert vec.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
+    vec.unwrapped.core.max_episode_steps = 3
+    vec.reset(seed=0)
+    for _ in range(2):
+        infos = vec.step(np.zeros((4, 12)))[4]
+        assert "final_obs" not in infos
+    obs, _, _term, trunc, infos = vec.step(np.zeros((4, 12)))
+    assert trunc.all() and infos["_final_obs"].all()
+    assert infos["final_obs"][0].shape == (observation_size(),)
+    assert vec.unwrapped.core.episode_step.tolist() == [0, 0, 0, 0]  # reset inside the step
+    assert obs.shape == (4, observation_size())
+
+
+def test_privileged_observation_and_structure(toy_weights: str) -> None:
+    vec = gym.make_vec(
+        "margin_rl/AnymalC-Rough-v0",
+        num_envs=2,
+        vectorization_mode="vector_entry_point",
+        margin_weights=toy_weights,
+        privileged_observations=True,
+    )
+    vec.reset(seed=0)
+    priv = vec.unwrapped.core.privileged_observation()
+    assert priv.shape == (2, 38) and np.all(np.isfinite(priv))
+    assert [t.name for t in POLICY_OBSERVATIONS][:3] == ["base_lin_vel", "base_ang_vel", "projected_gravity"]
+
+
+def test_rough_terrain_heights_match_mujoco_collision_geometry() -> None:
+    core = AnymalCore(EnvConfig(robot="anymal_c", terrain="rough", margin="none"), num_envs=1, seed=0)
+    data = mujoco.MjData(core.model)
+    mujoco.mj_forward(core.model, data)
+    rng = np.random.default_rng(0)
+    res, origin = core.terrain.resolution, core.terrain.origin
+    # At grid nodes the heightfield surface and the bilinear query coincide.
+    nodes = rng.integers(10, core.terrain.heights.shape[0] - 10, size=(40, 2))
+    geomid = np.array([-1], dtype=np.int32)
+    for r, c in nodes:
+        x, y = origin[0] + c * res, origin[1] + r * res
+        dist = mujoco.mj_ray(core.model, data, np.array([x, y, 3.0]), np.array([0, 0, -1.0]), None, 1, -1, geomid)
+        assert 3.0 - dist == pytest.approx(core.terrain.height(np.array([x, y])), abs=2e-3)
+    heights = core.terrain.heights
+    assert np.ptp(heights) >= 0.06 and np.isfinite(heights).all()
+
+
+def test_unknown_option_is_named() -> None:
+    with pytest.raises(TypeError, match="unknown environment options"):
+        gym.make("margin_rl/AnymalB-v0", margin_wieght=1.0)
+    with pytest.raises(ValueError, match="margin must be"):
+        gym.make("margin_rl/AnymalB-v0", margin="magic")
+
+
+def test_env_ids_are_registered_on_import() -> None:
+    assert margin_rl.envs.ANYMAL_ENV_IDS
+    for env_id in ANYMAL_ENV_IDS:
+        assert env_id in gym.registry
+
+
+def test_rgb_render(toy_weights: str, tmp_path: Path) -> None:
+    pytest.importorskip("mujoco")
+    env = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, render_mode="rgb_array", width=64, height=48)
+    env.reset(seed=0)
+    try:
+        frame = env.render()
+    except Exception as exc:  # no OpenGL platform on this machine
+        pytest.skip(f"no headless OpenGL here ({exc}); set MUJOCO_GL=egl or osmesa")
+    assert frame.shape == (48, 64, 3) and frame.std() > 0

@@ -227,7 +227,10 @@ class LearnedMargin:
         for WT, b in zip(self._W32T[:-1], self._b32[:-1], strict=True):
             h = h @ WT
             h += b
-            h = _softsign(h)
+            # softsign in place: h / (1 + |h|) without temporaries of the batch size.
+            denominator = np.abs(h)
+            denominator += 1.0
+            h /= denominator
         return (h @ self._W32T[-1] + self._b32[-1])[:, 0].astype(np.float64)
 
     def value_and_grad(self, lam: np.ndarray) -> tuple[float | np.ndarray, np.ndarray]:

@@ -1,0 +1,73 @@
+"""Benchmark: learned margin speed vs the analytic margin, measured side by side.
+
+Usage:
+    python benchmarks/bench_learned_margin.py [--robot anymal_c] [--weights PATH.npz] [--n-analytic 300]
+
+Rows: one lambda value, one lambda value + gradient (numpy), a batch of 4096 (value), a batch of 4096
+through the torch module, and the analytic margin on the same Table I states (one core, focused
+projection). Prints a Markdown table with the per-lambda speed-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from margin_rl import load_robot
+from margin_rl.stability.analytic import analytic_margin
+from margin_rl.stability.learned import LearnedMargin
+from margin_rl.stability.sampling import sample_states
+
+
+def per_call(fn, repeats: int) -> float:  # noqa: ANN001
+    times = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(repeats):
+            fn()
+        times.append((time.perf_counter() - t0) / repeats)
+    return float(np.median(times))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robot", default="anymal_c")
+    parser.add_argument("--weights", default=None, help="weights .npz (default: the robot's bundled weights)")
+    parser.add_argument("--n-analytic", type=int, default=300)
+    args = parser.parse_args()
+    model = LearnedMargin.load(args.weights or args.robot)
+    robot = load_robot(args.robot)
+    lams = sample_states(robot, 4096, seed=0)
+    one = lams[0]
+    single = per_call(lambda: model(one), 2000)
+    single_grad = per_call(lambda: model.value_and_grad(one), 2000)
+    batch = per_call(lambda: model(lams), 20)
+    module = model.torch_module()
+    x = torch.as_tensor(lams, dtype=torch.float32)
+    with torch.no_grad():
+        batch_torch = per_call(lambda: module(x), 20)
+    t0 = time.perf_counter()
+    for lam in lams[: args.n_analytic]:
+        analytic_margin(robot, lam)
+    analytic = (time.perf_counter() - t0) / args.n_analytic
+    print(f"robot {args.robot}, torch threads {torch.get_num_threads()}")
+    print()
+    print("| evaluation | time per call | lambda/s | speed-up per lambda vs analytic |")
+    print("|---|---|---|---|")
+    rows = [
+        ("analytic margin, one lambda (one core)", analytic, 1),
+        ("learned, one lambda, value (numpy)", single, 1),
+        ("learned, one lambda, value + gradient (numpy)", single_grad, 1),
+        ("learned, batch of 4096, value (numpy float32)", batch, 4096),
+        ("learned, batch of 4096, value (torch module)", batch_torch, 4096),
+    ]
+    for name, t, n in rows:
+        unit = f"{t * 1e6:.1f} µs" if t < 1e-3 else f"{t * 1e3:.2f} ms"
+        print(f"| {name} | {unit} | {n / t:,.0f} | {analytic / (t / n):,.0f}x |")
+
+
+if __name__ == "__main__":
+    main()

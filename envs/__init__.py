@@ -2,7 +2,9 @@
 
 Ids: ``margin_rl/AnymalB-v0``, ``margin_rl/AnymalC-v0`` (flat ground), ``margin_rl/AnymalB-Rough-v0``,
 ``margin_rl/AnymalC-Rough-v0`` (rough terrain), usable with ``gymnasium.make`` and
-``gymnasium.make_vec`` (native batched vector env). This package never imports SB3 or rsl-rl.
+``gymnasium.make_vec`` (native batched vector env); ``margin_rl/SLIPHopper-v0``: the actuated SLIP hopper
+of seed 001, one apex-to-apex hop per step, with an optional learned failure-margin reward term.
+This package never imports SB3 or rsl-rl.
 """
 
 from __future__ import annotations
@@ -35,3 +37,21 @@ def register_envs() -> None:
 
 
 register_envs()
+
+SLIP_HOPPER_ENV_ID = "margin_rl/SLIPHopper-v0"
+SLIP_HOPPER_EPISODE_HOPS = 50
+"""Episode length of ``margin_rl/SLIPHopper-v0`` in hops (one step = one apex-to-apex hop)."""
+
+
+def register_slip_envs() -> None:
+    """Register ``margin_rl/SLIPHopper-v0`` (aSLIP apex velocity tracking, :mod:`margin_rl.envs.slip_hopper`)."""
+    if SLIP_HOPPER_ENV_ID in gymnasium.registry:
+        return
+    gymnasium.register(
+        id=SLIP_HOPPER_ENV_ID,
+        entry_point="margin_rl.envs.slip_hopper:SlipHopperEnv",
+        max_episode_steps=SLIP_HOPPER_EPISODE_HOPS,
+    )
+
+
+register_slip_envs()

@@ -22,7 +22,7 @@ from margin_rl.stability.learned import LearnedMargin
 from margin_rl.stability.sampling import sample_states
 
 
-def per_call(fn, repeats: int) -> float:  # noqa: ANN001
+def per_call(fn, repeats: int) -> float:
     times = []
     for _ in range(5):
         t0 = time.perf_counter()

@@ -77,7 +77,9 @@ class EnvConfig:
     action_scale: float = 0.5  # joint-target offset [rad] per unit action
     episode_length_s: float = 20.0
     reward_preset: str = "paper"
-    margin: str = "learned"  # "learned", "analytic" (slow, validation) or "none"
+    # "learned", "analytic" (slow, ~2 ms per env step: validation), "fwp" (the feasible-wrench-polytope
+    # factor s of seed 004 as the margin term, dimensionless, ~4-12 ms per env step) or "none"
+    margin: str = "learned"
     margin_weight: float = 1.0  # weight of the margin term; 0 is the baseline of the comparison
     margin_weights: str | None = None  # learned-margin weights (.npz with its card); None: the robot's bundled
     logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
@@ -92,8 +94,8 @@ class EnvConfig:
             raise ValueError(f"terrain must be 'flat' or 'rough', got {self.terrain!r}")
         if self.reward_preset not in REWARD_PRESETS:
             raise ValueError(f"reward_preset must be one of {sorted(REWARD_PRESETS)}, got {self.reward_preset!r}")
-        if self.margin not in ("learned", "analytic", "none"):
-            raise ValueError(f"margin must be 'learned', 'analytic' or 'none', got {self.margin!r}")
+        if self.margin not in ("learned", "analytic", "fwp", "none"):
+            raise ValueError(f"margin must be 'learned', 'analytic', 'fwp' or 'none', got {self.margin!r}")
         if self.decimation < 1 or self.action_scale <= 0 or self.episode_length_s <= 0:
             raise ValueError("decimation, action_scale and episode_length_s must be positive")
         if not 0.0 <= self.acceleration_filter < 1.0:

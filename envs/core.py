@@ -18,8 +18,9 @@ Per policy step (``decimation`` physics steps at the MJCF timestep):
   - feet (foot-sphere centres) relative to the CoM and terrain normals under the feet, rotated into
     the horizontal frame (yaw of the base heading); friction of the terrain; contact flags from the
     MJCF's foot-world contact sensors;
-* margin m(lambda): learned (batch MLP), analytic (per env, slow) or zero, clipped to
-  ``margin_clip`` (states with no equilibrium get the lower clip);
+* margin m(lambda): learned (batch MLP), analytic (per env, slow), the FWP feasibility factor s of
+  seed 004 (per env, slower, dimensionless) or zero, clipped to ``MARGIN_CLIP`` (states with no
+  equilibrium get the lower clip);
 * reward terms (:mod:`margin_rl.envs.rewards`), terminations (base or thigh contact, height or tilt
   bounds, a diverged simulation) and truncation at the episode length.
 """
@@ -222,6 +223,15 @@ class AnymalCore:
                     return np.asarray(model(lam))
 
             return learned
+        if kind == "fwp":
+            from margin_rl.stability.fwp import fwp_feasibility
+
+            def fwp(lam: np.ndarray) -> np.ndarray:
+                # s <= 1 is dimensionless (a relative depth in the wrench polytope), not a distance.
+                values = np.array([fwp_feasibility(self.robot, x).s for x in lam])
+                return np.where(np.isfinite(values), values, MARGIN_CLIP[0])
+
+            return fwp
         from margin_rl.stability.analytic import analytic_margin
 
         def analytic(lam: np.ndarray) -> np.ndarray:

@@ -12,6 +12,8 @@ Robot layer (lambda in R^47, eq. 4)::
     sample_states(robot, n, seed)                    the Table I sampler
     analytic_margin(robot, lam)                      lambda -> IK -> region -> ICP -> m_a
     analytic_margin_batch(robot_name, lams)          the same over local processes
+    LearnedMargin.load(robot)                        the learned margin (value, gradient, torch, ONNX)
+    fwp_feasibility(robot, lam)                      the feasible-wrench-polytope factor s (seed 004)
 """
 
 from margin_rl.stability.analytic import (
@@ -22,6 +24,7 @@ from margin_rl.stability.analytic import (
     analytic_margin,
     analytic_margin_batch,
 )
+from margin_rl.stability.fwp import FWPFeasibility, feasible_wrench_polytope, fwp_feasibility
 from margin_rl.stability.icp import capture_point, stability_margin
 from margin_rl.stability.lambda_state import (
     LAMBDA_DIM,
@@ -31,6 +34,7 @@ from margin_rl.stability.lambda_state import (
     from_lambda,
     lambda_names,
 )
+from margin_rl.stability.learned import LearnedMargin
 from margin_rl.stability.region import FeasibleRegion, feasible_region
 from margin_rl.stability.sampling import SAMPLER_VERSION, TableI, sample_states
 
@@ -43,14 +47,18 @@ __all__ = [
     "AnalyticMarginResult",
     "AnalyticSettings",
     "BatchMargins",
+    "FWPFeasibility",
     "FeasibleRegion",
+    "LearnedMargin",
     "StabilityState",
     "TableI",
     "analytic_margin",
     "analytic_margin_batch",
     "capture_point",
     "feasible_region",
+    "feasible_wrench_polytope",
     "from_lambda",
+    "fwp_feasibility",
     "lambda_names",
     "sample_states",
     "stability_margin",

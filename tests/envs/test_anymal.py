@@ -256,3 +256,12 @@ def test_rgb_render(toy_weights: str, tmp_path: Path) -> None:
     except Exception as exc:  # no OpenGL platform on this machine
         pytest.skip(f"no headless OpenGL here ({exc}); set MUJOCO_GL=egl or osmesa")
     assert frame.shape == (48, 64, 3) and frame.std() > 0
+
+
+def test_fwp_factor_as_the_margin_term() -> None:
+    env = gym.make("margin_rl/AnymalC-v0", margin="fwp", randomization=NO_NOISE)
+    env.reset(seed=0)
+    for _ in range(20):
+        info = env.step(np.zeros(12))[4]
+    assert 0.0 < info["margin"] <= 1.0  # standing: strictly inside the feasible wrench polytope
+    assert info["reward_margin"] == pytest.approx(info["margin"])

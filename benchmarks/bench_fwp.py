@@ -1,0 +1,185 @@
+"""Benchmark of the Feasible Wrench Polytope criterion (:mod:`margin_rl.stability.fwp`) vs seed 004.
+
+For 3 and 4 non-coplanar contacts of ANYmal C (feet at different heights, tilted terrain normals,
+static state; ``--states`` random variations of that stance), prints a Markdown table with the vertex
+counts and times of each step next to the paper's Table I/II (HyQ, i5-4440 @ 3.1 GHz, Politopix for
+the V-description):
+
+* ``B_i``: vertices of the bounded friction cones (eq. 10); ``tested``: candidate sums examined by
+  the pruning; ``FWP vertices`` (paper: 436 and 1118) and the size of eq. (24) (paper: 437/1119
+  variables, 7 constraints);
+* ``V-descr.``: eq. (10)-(13) with pruning (paper: 0.15 s and 0.49 s); ``LP (24)``: eq. (24) as
+  written on the pruned vertices (paper: 90 and 350 ms); ``its dual``: the same value from the dual
+  program (what :func:`feasibility_factor` solves by default); ``summand LP``: the equivalent program
+  on the summands, without vertices;
+* ``end to end``: :func:`fwp_feasibility` from lambda (IK, Jacobians, bias torques, FWP, LP), with
+  ``prune=False`` (default) and ``prune=True`` (the paper's pipeline). Target: < 50 ms.
+
+Times are medians over states and ``--repeats`` [ms], wall clock on whatever else the machine runs
+(the load average is printed): run it on a quiet machine for numbers to quote.
+
+Usage::
+
+    python benchmarks/bench_fwp.py [--states 3] [--repeats 3] [--robot anymal_c] [--n-faces 4]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import clarabel
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from margin_rl import load_robot  # noqa: E402
+from margin_rl.robot import Robot  # noqa: E402
+from margin_rl.stability.analytic import ContactProblem, contact_problem  # noqa: E402
+from margin_rl.stability.fwp import (  # noqa: E402
+    feasibility_factor,
+    feasible_wrench_polytope,
+    fwp_feasibility,
+    gravito_inertial_wrench,
+    minkowski_feasibility_factor,
+)
+from margin_rl.stability.lambda_state import StabilityState  # noqa: E402
+from margin_rl.stability.sampling import nominal_feet  # noqa: E402
+
+PAPER = {  # Table I (LP) and Table II (Politopix V-description), HyQ
+    3: {"vertices": 436, "variables": 437, "v_descr_ms": 150.0, "lp_ms": 90.0},
+    4: {"vertices": 1118, "variables": 1119, "v_descr_ms": 490.0, "lp_ms": 350.0},
+}
+# Non-coplanar stance: foot heights [m] (LF, RF, LH, RH) and terrain normal tilts [rad] about x and y.
+HEIGHTS = np.array([0.08, 0.03, 0.0, -0.05])
+TILTS = np.array([[0.0, 0.2], [0.0, 0.0], [-0.15, 0.0], [0.1, 0.1]])
+
+
+def normal(tilt_x: float, tilt_y: float) -> np.ndarray:
+    n = np.array([np.sin(tilt_y) * np.cos(tilt_x), -np.sin(tilt_x), np.cos(tilt_x) * np.cos(tilt_y)])
+    return n / np.linalg.norm(n)
+
+
+def make_states(robot: Robot, n_contacts: int, n_states: int, seed: int) -> list[np.ndarray]:
+    """The reference non-coplanar stance, then random variations (heights +-3 cm, tilts +-0.1 rad)."""
+    rng = np.random.default_rng(seed + n_contacts)
+    contacts = np.ones(4) if n_contacts == 4 else np.array([1.0, 1.0, 1.0, 0.0])
+    lams = []
+    while len(lams) < n_states:
+        k = len(lams)
+        heights = HEIGHTS + (rng.uniform(-0.03, 0.03, 4) if k else 0.0)
+        tilts = TILTS + (rng.uniform(-0.1, 0.1, (4, 2)) if k else 0.0)
+        feet = nominal_feet(robot) + np.column_stack([np.zeros((4, 2)), heights])
+        lam = StabilityState(
+            gravity_axis=np.array([0.0, 0.0, 1.0]),
+            com_vel=np.zeros(3),
+            com_acc=np.zeros(3),
+            base_ang_acc=np.zeros(3),
+            ext_force=np.zeros(3),
+            ext_torque=np.zeros(3),
+            feet=feet,
+            mu=np.array(0.7),
+            contacts=contacts,
+            normals=np.array([normal(*t) for t in tilts]),
+        ).to_lambda()
+        if isinstance(contact_problem(robot, lam), ContactProblem):
+            lams.append(lam)
+    return lams
+
+
+def measure(robot: Robot, lam: np.ndarray, n_faces: int) -> dict[str, Any]:
+    """One pass over every step; times in ms."""
+    problem = contact_problem(robot, lam)
+    assert isinstance(problem, ContactProblem)
+    fwp = feasible_wrench_polytope(
+        problem.contact_points,
+        problem.normals,
+        problem.stance,
+        problem.mu,
+        problem.jacobians,
+        problem.torque_limits,
+        problem.leg_bias,
+        n_faces=n_faces,
+    )
+    w = gravito_inertial_wrench(
+        problem.mass, problem.com_acc, problem.ang_momentum_rate, problem.ext_force, problem.ext_torque, problem.gravity
+    )
+    on_vertices = feasibility_factor(fwp.vertices, w, center=fwp.center, length_scale=fwp.length_scale)
+    primal = feasibility_factor(fwp.vertices, w, center=fwp.center, length_scale=fwp.length_scale, dual=False)
+    on_summands = minkowski_feasibility_factor(fwp, w)
+    assert abs(on_vertices.s - on_summands.s) < 1e-5 and abs(primal.s - on_summands.s) < 1e-5
+    t0 = time.perf_counter()
+    fast = fwp_feasibility(robot, lam, n_faces=n_faces)
+    t1 = time.perf_counter()
+    fwp_feasibility(robot, lam, n_faces=n_faces, prune=True)
+    t2 = time.perf_counter()
+    return {
+        "b_i": fwp.contact_vertex_counts,
+        "tested": fwp.n_candidates,
+        "vertices": fwp.n_vertices,
+        "variables": on_vertices.n_variables,
+        "constraints": on_vertices.n_constraints,
+        "v_descr": 1e3 * fwp.timings["total"],
+        "lp": 1e3 * primal.solve_time,
+        "lp_dual": 1e3 * on_vertices.solve_time,
+        "summand_lp": 1e3 * on_summands.solve_time,
+        "e2e_fast": 1e3 * (t1 - t0),
+        "e2e_paper": 1e3 * (t2 - t1),
+        "s": fast.s,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--states", type=int, default=3, help="stances per case (the first is the reference)")
+    parser.add_argument("--repeats", type=int, default=3, help="timed passes per stance")
+    parser.add_argument("--robot", default="anymal_c")
+    parser.add_argument("--n-faces", type=int, default=4, help="faces of the linearised friction cones")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+
+    robot = load_robot(args.robot)
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            cpu = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    print(f"# FWP benchmark: {args.robot}, {args.n_faces}-face friction pyramids, static non-coplanar stances")
+    print(f"CPU: {cpu}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
+    print(f"numpy {np.__version__}, clarabel {clarabel.__version__}")
+    print(f"Medians over {args.states} stance(s) x {args.repeats} repeat(s) [ms]; paper values in parentheses.\n")
+    print(
+        "| contacts | B_i vertices | tested | FWP vertices (paper) | LP vars / rows (paper) | V-descr. (paper) "
+        "| LP (24) (paper) | its dual | summand LP | end to end, prune=False | end to end, prune=True |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for n_contacts in (3, 4):
+        runs = []
+        for lam in make_states(robot, n_contacts, args.states, args.seed):
+            measure(robot, lam, args.n_faces)  # warm-up (imports, caches)
+            runs.extend(measure(robot, lam, args.n_faces) for _ in range(args.repeats))
+        ref, paper = runs[0], PAPER[n_contacts]
+
+        def med(key: str, runs: list[dict[str, Any]] = runs) -> float:
+            return float(np.median([r[key] for r in runs]))
+
+        counts = sorted({r["vertices"] for r in runs})
+        span = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+        print(
+            f"| {n_contacts} | {', '.join(map(str, ref['b_i']))} | {ref['tested']} | {span} ({paper['vertices']}) "
+            f"| {ref['variables']} / {ref['constraints']} ({paper['variables']} / 7) "
+            f"| {med('v_descr'):.0f} ({paper['v_descr_ms']:.0f}) | {med('lp'):.1f} ({paper['lp_ms']:.0f}) "
+            f"| {med('lp_dual'):.1f} | {med('summand_lp'):.1f} | {med('e2e_fast'):.1f} | {med('e2e_paper'):.0f} |"
+        )
+    print("\nB_i and tested: the reference stance; FWP vertices: range over the stances.")
+
+
+if __name__ == "__main__":
+    main()

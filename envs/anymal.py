@@ -38,6 +38,7 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.core import AnymalCore
 from margin_rl.envs.observations import observation_size, observation_structure

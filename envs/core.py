@@ -32,6 +32,8 @@ from pathlib import Path
 
 import mujoco
 import numpy as np
+from mujoco import batch as mj_batch
+
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.observations import (
     FOOT_HEIGHT_OFFSETS,
@@ -41,8 +43,6 @@ from margin_rl.envs.observations import (
 )
 from margin_rl.envs.rewards import compute_rewards
 from margin_rl.envs.terrain import Terrain, flat_terrain, rough_terrain
-from mujoco import batch as mj_batch
-
 from margin_rl.robot import Robot, load_robot, quat_wxyz_to_matrix
 from margin_rl.stability.lambda_state import LAMBDA_DIM, StabilityState
 

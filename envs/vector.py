@@ -15,6 +15,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
+
 from margin_rl.envs.anymal import make_config
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.core import AnymalCore

@@ -9,12 +9,12 @@ import mujoco
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+
+import margin_rl
 from margin_rl.envs import ANYMAL_ENV_IDS, EPISODE_STEPS
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore, heading_rotation, lambda_from_simulation
 from margin_rl.envs.observations import POLICY_OBSERVATIONS, observation_size
-
-import margin_rl
 from margin_rl.robot import quat_wxyz_to_matrix
 from margin_rl.stability.lambda_state import from_lambda
 from tests.stability.test_learned import random_weights

@@ -6,10 +6,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from margin_rl.envs import SLIP_HOPPER_ENV_ID, SLIP_HOPPER_EPISODE_HOPS
-from margin_rl.envs.slip_hopper import ACTION_HIGH, ACTION_LOW, SlipHopperEnv, action_to_physical
 
 import margin_rl  # noqa: F401 - registers the ids
+from margin_rl.envs import SLIP_HOPPER_ENV_ID, SLIP_HOPPER_EPISODE_HOPS
+from margin_rl.envs.slip_hopper import ACTION_HIGH, ACTION_LOW, SlipHopperEnv, action_to_physical
 from margin_rl.slip.dynamics import Status, simulate_hop
 from margin_rl.slip.models import load_bundle
 

@@ -1,0 +1,261 @@
+"""``compare``: PPO without and with the stability-margin reward, over seeds, on the same budget (seed 000 §V-C).
+
+Example::
+
+    python -m margin_rl.train.compare --env margin_rl/AnymalB-v0 --backend rsl --seeds 3 \\
+        --total-steps 5000000 --margin-weight 1.0 --out runs/compare_b
+
+For each variant (margin weight 0, and ``--margin-weight``) and each training seed, a run is trained into
+``<out>/runs/mw<weight>__s<seed>`` (a finished run is reused, a stopped one resumed), then evaluated on the same
+fixed command and the same evaluation seeds. Both variants use the same margin model, so the margin is
+measured for the baseline too. Outputs in ``<out>``:
+
+* ``compare.png``: Fig. 9-style base acceleration over an evaluation episode (blue without, red with margin),
+  per base-frame axis, from the first training seed and the first evaluation episode;
+* ``compare.md`` and ``compare.json``: mean ± std over training seeds (each seed's value is its mean over the
+  evaluation episodes) of velocity tracking error, base linear and angular acceleration RMS, stance width,
+  margin and falls, with every run's numbers in the JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from margin_rl.train.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate
+from margin_rl.train.metrics import SUMMARY_METRICS, mean_std
+from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, read_json, write_json
+from margin_rl.train.train import (
+    DEFAULT_BACKEND,
+    DEFAULT_ENV,
+    DEFAULT_NUM_ENVS,
+    TrainSpec,
+    add_env_arguments,
+    env_overrides,
+    make_spec,
+    train,
+)
+
+COLORS = {"without margin": "tab:blue", "with margin": "tab:red"}  # Fig. 9 of seed 000
+
+
+@dataclass(frozen=True)
+class CompareSettings:
+    """What ``compare`` trains and how it evaluates."""
+
+    env_id: str = DEFAULT_ENV
+    backend: str = DEFAULT_BACKEND
+    margin_weight: float = 1.0  # weight of the "with margin" variant (the other is 0)
+    seeds: tuple[int, ...] = (0, 1, 2)  # training seeds
+    num_envs: int = DEFAULT_NUM_ENVS
+    total_steps: int = 5_000_000  # per run
+    checkpoint_every: int = 500_000
+    eval_episodes: int = 4
+    eval_seed: int = 1000  # the same evaluation seeds for every policy
+    forward_velocity: float = DEFAULT_FORWARD_VELOCITY  # the same command for every policy [m/s]
+    warmup_s: float = 1.0
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if self.margin_weight <= 0:
+            raise ValueError(f"--margin-weight must be > 0 (the baseline uses 0), got {self.margin_weight}")
+        if not self.seeds:
+            raise ValueError("at least one seed is needed")
+
+    def variants(self) -> dict[str, float]:
+        """Variant name -> margin weight."""
+        return {"without margin": 0.0, "with margin": self.margin_weight}
+
+
+def _run_spec(settings: CompareSettings, weight: float, seed: int, overrides: dict[str, Any]) -> TrainSpec:
+    return make_spec(
+        settings.env_id,
+        settings.backend,
+        {**overrides, "margin_weight": weight},
+        None,
+        seed=seed,
+        num_envs=settings.num_envs,
+        total_steps=settings.total_steps,
+        checkpoint_every=settings.checkpoint_every,
+        device=settings.device,
+    )
+
+
+def _train_or_reuse(spec: TrainSpec, run_dir: Path, progress: bool) -> Path:
+    """Train a run, resume a stopped one, or reuse a finished one; returns its final model."""
+    final = run_dir / ("final_model.zip" if spec.backend == "sb3" else "final_model.pt")
+    finished = (run_dir / PROGRESS_FILE).is_file() and read_json(run_dir / PROGRESS_FILE).get("finished")
+    if finished and final.is_file():
+        print(f"reusing finished run {run_dir}")
+        return final
+    resume = (run_dir / CONFIG_FILE).is_file()
+    result = train(spec, run_dir, resume=resume, progress=progress)
+    if result.stopped or result.final_model is None:
+        raise KeyboardInterrupt(f"training of {run_dir} was stopped; run compare again to resume it")
+    return result.final_model
+
+
+def run_compare(
+    settings: CompareSettings, out: str | Path, env_options: dict[str, Any] | None = None, progress: bool = True
+) -> dict[str, Any]:
+    """Train and evaluate every (variant, seed); write compare.png/.md/.json into ``out``; returns the JSON."""
+    out = Path(out)
+    overrides = dict(env_options or {})
+    report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": overrides, "variants": {}}
+    examples: dict[str, Evaluation] = {}
+    for name, weight in settings.variants().items():
+        runs = []
+        for seed in settings.seeds:
+            run_dir = out / "runs" / f"mw{weight:g}__s{seed}"
+            spec = _run_spec(settings, weight, seed, overrides)
+            final = _train_or_reuse(spec, run_dir, progress)
+            metrics, evaluation = evaluate(
+                final,
+                episodes=settings.eval_episodes,
+                seed=settings.eval_seed,
+                forward_velocity=settings.forward_velocity,
+                warmup_s=settings.warmup_s,
+                out_dir=run_dir / "eval",
+            )
+            examples.setdefault(name, evaluation)
+            summary = {k: v["mean"] for k, v in metrics["summary"].items()}
+            runs.append({"seed": seed, "run_dir": str(run_dir), "policy": str(final), "metrics": summary})
+        table = {key: mean_std([r["metrics"][key] for r in runs]) for key in SUMMARY_METRICS}
+        report["variants"][name] = {
+            "margin_weight": weight,
+            "runs": runs,
+            "mean": {k: v[0] for k, v in table.items()},
+            "std": {k: v[1] for k, v in table.items()},
+        }
+    out.mkdir(parents=True, exist_ok=True)
+    report["plot"] = plot_accelerations(examples, out / "compare.png", settings).name
+    report["table"] = write_markdown(report, out / "compare.md").name
+    write_json(out / "compare.json", report)
+    return report
+
+
+def _settings_json(settings: CompareSettings) -> dict[str, Any]:
+    from dataclasses import asdict
+
+    data = asdict(settings)
+    data["seeds"] = list(settings.seeds)
+    return data
+
+
+def plot_accelerations(examples: dict[str, Evaluation], path: Path, settings: CompareSettings) -> Path:
+    """Fig. 9 style: base linear acceleration per base-frame axis over one evaluation episode, both variants."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    for name, evaluation in examples.items():
+        traj = evaluation.trajectory
+        after = traj["time"] > settings.warmup_s
+        norm_sq = np.sum(traj["lin_acc"][after] ** 2, axis=1)
+        rms = float(np.sqrt(norm_sq.mean())) if norm_sq.size else float("nan")
+        for k, axis in enumerate("xyz"):
+            label = f"{name} (RMS {rms:.2f} m/s² after {settings.warmup_s:g} s)" if k == 0 else None
+            axes[k].plot(traj["time"], traj["lin_acc"][:, k], color=COLORS.get(name), lw=0.9, label=label)
+            axes[k].set_ylabel(f"base acc. {axis} [m/s²]")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.axvspan(0.0, settings.warmup_s, color="0.9", zorder=0)  # landing after the reset, not in the table
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(
+        f"{settings.env_id}, {settings.backend}: base acceleration, command {settings.forward_velocity:g} m/s "
+        f"(seed {settings.seeds[0]}, evaluation seed {settings.eval_seed})"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_markdown(report: dict[str, Any], path: Path) -> Path:
+    """The comparison table (mean ± std over training seeds) as Markdown."""
+    s = report["settings"]
+    lines = [
+        f"# Margin reward comparison: {s['env_id']} ({s['backend']})",
+        "",
+        f"{len(s['seeds'])} training seed(s) {s['seeds']}, {s['total_steps']:,} environment steps each, "
+        f"{s['num_envs']} environments; evaluation: {s['eval_episodes']} deterministic episode(s) from seed "
+        f"{s['eval_seed']}, command {s['forward_velocity']:g} m/s, accelerations after the first "
+        f"{s['warmup_s']:g} s. Values: mean ± std over training seeds of each seed's mean over its episodes.",
+        "",
+        "| variant | margin weight | " + " | ".join(SUMMARY_METRICS.values()) + " |",
+        "|---|---|" + "---|" * len(SUMMARY_METRICS),
+    ]
+    for name, variant in report["variants"].items():
+        cells = [f"{variant['mean'][k]:.4g} ± {variant['std'][k]:.2g}" for k in SUMMARY_METRICS]
+        lines.append(f"| {name} | {variant['margin_weight']:g} | " + " | ".join(cells) + " |")
+    lines += ["", f"![base acceleration]({report['plot']})", ""]
+    path.write_text("\n".join(lines))
+    return path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="margin-rl-compare", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    add_env_arguments(parser)
+    d = CompareSettings()
+    parser.add_argument("--backend", choices=("rsl", "sb3"), default=d.backend)
+    parser.add_argument("--margin-weight", type=float, default=d.margin_weight, help="weight of the margin variant")
+    parser.add_argument("--seeds", type=int, default=len(d.seeds), help="number of training seeds (0, 1, ...)")
+    parser.add_argument("--num-envs", type=int, default=d.num_envs)
+    parser.add_argument("--total-steps", type=int, default=d.total_steps, help="environment steps per run")
+    parser.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
+    parser.add_argument("--eval-episodes", type=int, default=d.eval_episodes)
+    parser.add_argument("--eval-seed", type=int, default=d.eval_seed)
+    parser.add_argument("--forward-velocity", type=float, default=d.forward_velocity, help="command [m/s]")
+    parser.add_argument("--warmup-s", type=float, default=d.warmup_s)
+    parser.add_argument("--device", default=d.device)
+    parser.add_argument("--out", type=Path, help="output folder (default runs/compare__<env>__<backend>)")
+    parser.add_argument("--no-progress", action="store_true")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    env_id = args.env or DEFAULT_ENV
+    try:
+        settings = CompareSettings(
+            env_id=env_id,
+            backend=args.backend,
+            margin_weight=args.margin_weight,
+            seeds=tuple(range(args.seeds)),
+            num_envs=args.num_envs,
+            total_steps=args.total_steps,
+            checkpoint_every=args.checkpoint_every,
+            eval_episodes=args.eval_episodes,
+            eval_seed=args.eval_seed,
+            forward_velocity=args.forward_velocity,
+            warmup_s=args.warmup_s,
+            device=args.device,
+        )
+        options = env_overrides(args)
+        options.pop("margin_weight", None)
+        out = args.out or Path("runs") / f"compare__{env_id.split('/')[-1]}__{args.backend}"
+        report = run_compare(settings, out, options, progress=not args.no_progress)
+    except (ValueError, TypeError) as exc:
+        parser.error(str(exc))
+    except KeyboardInterrupt as exc:
+        print(f"\n{exc or 'interrupted'}", file=sys.stderr)
+        return 130
+    print(Path(out / report["table"]).read_text())
+    print(f"wrote {out / 'compare.png'}, {out / 'compare.md'}, {out / 'compare.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

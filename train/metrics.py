@@ -1,0 +1,236 @@
+"""Episode metrics, computed in one place for training logs, ``evaluate`` and ``compare``.
+
+:class:`EpisodeStatistics` keeps per-environment running sums over the current episode of the per-step
+quantities that :meth:`margin_rl.envs.core.AnymalCore.step` reports in ``info``, and returns the metrics of
+every episode that ends. Metric names and units:
+
+===============================  ==========================================================================
+``return``                       sum of the reward over the episode
+``length``                       policy steps; ``duration_s`` the same in seconds
+``reward/<term>``                sum over the episode of each weighted reward term (``info["reward_<term>"]``)
+``margin_mean``, ``margin_min``  stability margin [m]: mean and minimum over the episode
+``margin_negative_fraction``     fraction of steps with a negative margin (outside the feasible region)
+``lin_acc_rms_{x,y,z}``          RMS of the base (CoM) linear acceleration per base-frame axis [m/s²]
+``lin_acc_peak_{x,y,z}``         peak of its absolute value [m/s²]; ``lin_acc_rms`` RMS of its norm
+``ang_acc_rms_{x,y,z}`` ...      the same for the base angular acceleration [rad/s²]
+``velocity_error_mean``          mean |v_cmd − ẋ| of the heading velocity [m/s]
+``forward_velocity_mean``        mean heading velocity ẋ in the base frame [m/s]
+``stance_width_mean``            mean lateral foot spread in the heading frame [m]
+``fell``, ``diverged``           1 if the episode ended in a fall / a diverged simulation, else 0
+``timed_out``                    1 if the episode reached its time limit
+===============================  ==========================================================================
+
+Acceleration statistics skip the first ``warmup_steps`` of each episode (the landing after a reset) when
+asked to; training logs use every step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+
+import numpy as np
+
+AXES: tuple[str, ...] = ("x", "y", "z")
+TERMINATION_KEYS: tuple[str, ...] = ("fell", "diverged", "timed_out")
+
+SUMMARY_METRICS: dict[str, str] = {
+    "velocity_error_mean": "velocity tracking error [m/s]",
+    "lin_acc_rms": "base linear acceleration RMS [m/s²]",
+    "ang_acc_rms": "base angular acceleration RMS [rad/s²]",
+    "stance_width_mean": "stance width [m]",
+    "margin_mean": "stability margin [m]",
+    "fell": "falls [fraction of episodes]",
+}
+"""The comparison table's columns: metric name -> label with unit."""
+
+
+def reward_terms(info: Mapping[str, np.ndarray]) -> tuple[str, ...]:
+    """Reward term names present in a step ``info`` (keys ``reward_<term>``)."""
+    return tuple(k.removeprefix("reward_") for k in info if k.startswith("reward_"))
+
+
+class EpisodeStatistics:
+    """Running per-environment episode sums; :meth:`update` returns the metrics of the episodes that ended."""
+
+    def __init__(self, num_envs: int, dt: float, warmup_steps: int = 0) -> None:
+        """``dt``: policy step [s]; ``warmup_steps``: steps at the start of each episode left out of the
+        acceleration statistics."""
+        self.num_envs, self.dt, self.warmup_steps = num_envs, float(dt), int(warmup_steps)
+        self.terms: tuple[str, ...] = ()
+        n = num_envs
+        self._return = np.zeros(n)
+        self._length = np.zeros(n, dtype=np.int64)
+        self._terms = np.zeros((n, 0))
+        self._margin_sum = np.zeros(n)
+        self._margin_min = np.full(n, np.inf)
+        self._margin_negative = np.zeros(n)
+        self._acc_count = np.zeros(n)
+        self._lin_sq = np.zeros((n, 3))
+        self._lin_peak = np.zeros((n, 3))
+        self._ang_sq = np.zeros((n, 3))
+        self._ang_peak = np.zeros((n, 3))
+        self._vel_err = np.zeros(n)
+        self._fwd_vel = np.zeros(n)
+        self._stance = np.zeros(n)
+
+    def reset(self, ids: np.ndarray | None = None) -> None:
+        """Start new episodes in environments ``ids`` (all if None)."""
+        ids = slice(None) if ids is None else ids
+        for array in (
+            self._return,
+            self._length,
+            self._terms,
+            self._margin_sum,
+            self._margin_negative,
+            self._acc_count,
+            self._lin_sq,
+            self._lin_peak,
+            self._ang_sq,
+            self._ang_peak,
+            self._vel_err,
+            self._fwd_vel,
+            self._stance,
+        ):
+            array[ids] = 0
+        self._margin_min[ids] = np.inf
+
+    def update(
+        self,
+        reward: np.ndarray,
+        info: Mapping[str, np.ndarray],
+        terminated: np.ndarray,
+        truncated: np.ndarray,
+    ) -> dict[str, np.ndarray]:
+        """Add one step of every environment; returns the metrics (arrays over the finished episodes, in
+        environment order, plus ``"env"``: their indices) and starts new episodes there. Empty when none ended."""
+        if not self.terms:
+            self.terms = reward_terms(info)
+            self._terms = np.zeros((self.num_envs, len(self.terms)))
+        self._return += reward
+        self._length += 1
+        if self.terms:
+            self._terms += np.column_stack([info[f"reward_{t}"] for t in self.terms])
+        margin = np.asarray(info["margin"], dtype=float)
+        self._margin_sum += margin
+        self._margin_min = np.minimum(self._margin_min, margin)
+        self._margin_negative += margin < 0
+        counted = (self._length > self.warmup_steps)[:, None]
+        lin, ang = np.asarray(info["base_lin_acc"]), np.asarray(info["base_ang_acc"])
+        self._acc_count += counted[:, 0]
+        self._lin_sq += counted * lin**2
+        self._ang_sq += counted * ang**2
+        self._lin_peak = np.where(counted, np.maximum(self._lin_peak, np.abs(lin)), self._lin_peak)
+        self._ang_peak = np.where(counted, np.maximum(self._ang_peak, np.abs(ang)), self._ang_peak)
+        self._vel_err += info["velocity_error"]
+        self._fwd_vel += np.asarray(info["base_lin_vel"])[:, 0]
+        self._stance += info["stance_width"]
+        done = np.asarray(terminated, dtype=bool) | np.asarray(truncated, dtype=bool)
+        if not done.any():
+            return {}
+        ids = np.flatnonzero(done)
+        metrics = self._finish(ids, info, np.asarray(truncated, dtype=bool))
+        self.reset(ids)
+        return metrics
+
+    def close(self, ids: np.ndarray, info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """End the running episodes of ``ids`` without another step (counted as time-outs); their metrics."""
+        ids = np.asarray(ids, dtype=np.int64)
+        if ids.size == 0:
+            return {}
+        metrics = self._finish(ids, info, np.ones(self.num_envs, dtype=bool))
+        self.reset(ids)
+        return metrics
+
+    def _finish(self, ids: np.ndarray, info: Mapping[str, np.ndarray], truncated: np.ndarray) -> dict[str, np.ndarray]:
+        length = self._length[ids].astype(float)
+        count = self._acc_count[ids]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lin_ms = self._lin_sq[ids] / count[:, None]
+            ang_ms = self._ang_sq[ids] / count[:, None]
+        no_acc = count == 0
+        metrics: dict[str, np.ndarray] = {
+            "env": ids,
+            "return": self._return[ids].copy(),
+            "length": length,
+            "duration_s": length * self.dt,
+        }
+        for j, term in enumerate(self.terms):
+            metrics[f"reward/{term}"] = self._terms[ids, j].copy()
+        metrics["margin_mean"] = self._margin_sum[ids] / length
+        metrics["margin_min"] = self._margin_min[ids].copy()
+        metrics["margin_negative_fraction"] = self._margin_negative[ids] / length
+        for name, ms, peak in (("lin_acc", lin_ms, self._lin_peak[ids]), ("ang_acc", ang_ms, self._ang_peak[ids])):
+            for k, axis in enumerate(AXES):
+                metrics[f"{name}_rms_{axis}"] = np.sqrt(ms[:, k])
+                metrics[f"{name}_peak_{axis}"] = np.where(no_acc, np.nan, peak[:, k])
+            metrics[f"{name}_rms"] = np.sqrt(ms.sum(axis=1))
+        metrics["velocity_error_mean"] = self._vel_err[ids] / length
+        metrics["forward_velocity_mean"] = self._fwd_vel[ids] / length
+        metrics["stance_width_mean"] = self._stance[ids] / length
+        metrics["fell"] = np.asarray(info["fell"], dtype=float)[ids]
+        metrics["diverged"] = np.asarray(info["diverged"], dtype=float)[ids]
+        metrics["timed_out"] = truncated[ids].astype(float)
+        return metrics
+
+
+def split_episodes(metrics: Mapping[str, np.ndarray]) -> list[dict[str, float]]:
+    """The arrays of :meth:`EpisodeStatistics.update` as one dict of floats per episode."""
+    if not metrics:
+        return []
+    keys = list(metrics)
+    count = len(metrics[keys[0]])
+    return [{k: float(metrics[k][i]) for k in keys} for i in range(count)]
+
+
+def tensorboard_tags(metrics: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Episode metrics under their TensorBoard tags (the same for both backends):
+    ``Episode_Reward/<term>``, ``Episode_Termination/<fell|diverged|timed_out>``, ``Episode_Metrics/<name>``."""
+    tags: dict[str, np.ndarray] = {}
+    for key, value in metrics.items():
+        if key == "env":
+            continue
+        if key.startswith("reward/"):
+            tags[f"Episode_Reward/{key.removeprefix('reward/')}"] = value
+        elif key in TERMINATION_KEYS:
+            tags[f"Episode_Termination/{key}"] = value
+        else:
+            tags[f"Episode_Metrics/{key}"] = value
+    return tags
+
+
+def step_tags(info: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """Per-step statistics over the batch (logged every step, also before any episode ends)."""
+    margin = np.asarray(info["margin"], dtype=float)
+    lin = np.linalg.norm(np.asarray(info["base_lin_acc"]), axis=1)
+    return {
+        "Step/margin_mean": float(margin.mean()),
+        "Step/margin_min": float(margin.min()),
+        "Step/lin_acc_norm_mean": float(lin.mean()),
+        "Step/velocity_error_mean": float(np.mean(info["velocity_error"])),
+    }
+
+
+def summarize(episodes: Iterable[Mapping[str, float]]) -> dict[str, dict[str, float]]:
+    """Mean and standard deviation (population, ddof 0) of each metric over episodes, ignoring NaN."""
+    episodes = list(episodes)
+    keys = [k for k in (episodes[0] if episodes else {}) if k != "env"]
+    summary: dict[str, dict[str, float]] = {}
+    for key in keys:
+        values = np.array([e[key] for e in episodes if key in e], dtype=float)
+        finite = values[np.isfinite(values)]
+        summary[key] = {
+            "mean": float(finite.mean()) if finite.size else math.nan,
+            "std": float(finite.std()) if finite.size else math.nan,
+            "count": int(finite.size),
+        }
+    return summary
+
+
+def mean_std(values: Sequence[float]) -> tuple[float, float]:
+    """Mean and population standard deviation of finite values (NaN, NaN when there are none)."""
+    array = np.asarray(values, dtype=float)
+    array = array[np.isfinite(array)]
+    if array.size == 0:
+        return math.nan, math.nan
+    return float(array.mean()), float(array.std())

@@ -1,0 +1,162 @@
+"""PPO through rsl-rl's ``OnPolicyRunner`` (rsl-rl-lib 5.x), with atomic checkpoints, exact resume and stop.
+
+PPO itself is rsl-rl's. :class:`CheckpointingRunner` only changes where and how checkpoints are written
+(``<run>/checkpoints/ckpt_<steps>.pt`` via a temporary file, with the training config, the progress and the
+random-number states inside), and hooks the runner's per-iteration logger call to advance the progress bar
+and to stop at an iteration boundary when a stop is requested (SIGINT/SIGTERM).
+
+Resume: the checkpoint restores actor, critic (with their observation normalisers), optimizer and learning
+rate (the adaptive schedule's), the iteration counter (the next iteration is numbered after the last completed
+one, so TensorBoard's x axis continues) and the torch/numpy generators. Episodes running at the stop are
+lost: the environments start fresh.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import shutil
+import statistics
+import tempfile
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("GIT_PYTHON_REFRESH", "quiet")
+
+import torch
+from rsl_rl.runners import OnPolicyRunner
+
+from margin_rl.train.adapters import RslVecEnv
+from margin_rl.train.runs import (
+    TENSORBOARD_DIR,
+    TORCHSCRIPT_FILE,
+    RunHooks,
+    atomic_write,
+    checkpoint_path,
+    quiet_stdout,
+    torchscript_export,
+)
+
+CHECKPOINT_FORMAT = "margin_rl/rsl-checkpoint-1"
+
+
+class TrainingStopped(Exception):  # noqa: N818 - a control-flow signal, not an error
+    """Raised at an iteration boundary after a stop request, once the checkpoint is written."""
+
+
+class CheckpointingRunner(OnPolicyRunner):
+    """rsl-rl's OnPolicyRunner writing atomic, self-describing checkpoints (see the module docstring)."""
+
+    def __init__(self, env: RslVecEnv, train_cfg: dict[str, Any], run_dir: Path, device: str, hooks: RunHooks) -> None:
+        with quiet_stdout(not hooks.verbose):
+            super().__init__(env, copy.deepcopy(train_cfg), log_dir=str(run_dir / TENSORBOARD_DIR), device=device)
+        self.adapter = env
+        self.run_dir = run_dir
+        self.hooks = hooks
+        self.completed_iterations = 0
+        self.steps_per_iteration = env.num_envs * int(train_cfg["num_steps_per_env"])
+        self._logger_log = self.logger.log
+        self.logger.log = self._after_iteration  # the runner calls this once per iteration, after the update
+
+    @property
+    def env_steps(self) -> int:
+        """Environment steps in the completed iterations."""
+        return self.completed_iterations * self.steps_per_iteration
+
+    def _after_iteration(self, **kwargs: Any) -> None:
+        with quiet_stdout(not self.hooks.verbose):
+            self._logger_log(**kwargs)
+        self.completed_iterations = int(kwargs["it"]) + 1
+        rewards = self.logger.rewbuffer
+        self.hooks.progress(self.env_steps, statistics.mean(rewards) if rewards else None)
+        if self.hooks.stop_requested():
+            self.save("")
+            raise TrainingStopped
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint_dict(self) -> dict[str, Any]:
+        """rsl-rl's saved dict plus our progress, config and generator states (all weights_only-loadable)."""
+        saved = self.alg.save()
+        saved["iter"] = self.completed_iterations - 1
+        saved["infos"] = {
+            "format": CHECKPOINT_FORMAT,
+            "completed_iterations": self.completed_iterations,
+            "env_steps": self.env_steps,
+            "elapsed_s": float(self.logger.tot_time),
+            "train_cfg": copy.deepcopy(self.cfg),
+            "obs_dim": int(self.adapter.get_observations()["policy"].shape[-1]),
+            "num_actions": int(self.adapter.num_actions),
+            "torch_rng_state": torch.get_rng_state(),
+            "numpy_rng_state": self.adapter.core.rng.bit_generator.state,
+        }
+        return saved
+
+    def save(self, path: str, infos: dict | None = None) -> None:
+        """Write ``<run>/checkpoints/ckpt_<steps>.pt`` atomically (the runner's own ``path`` is ignored)."""
+        target = checkpoint_path(self.run_dir, self.env_steps, "rsl")
+        state = self.checkpoint_dict()
+        atomic_write(target, lambda f: torch.save(state, f))
+        self.hooks.checkpointed(target, self.env_steps)
+
+    def restore(self, path: Path) -> None:
+        """Continue from a checkpoint of :meth:`save` (loaded with ``weights_only=True``)."""
+        loaded = torch.load(path, map_location="cpu", weights_only=True)
+        infos = loaded.get("infos") or {}
+        if infos.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"{path}: not a margin_rl rsl-rl training checkpoint (format {infos.get('format')!r})")
+        self.alg.load(loaded, None, strict=True)
+        self.completed_iterations = int(infos["completed_iterations"])
+        self.current_learning_iteration = self.completed_iterations
+        self.logger.tot_timesteps = self.env_steps
+        self.logger.tot_time = float(infos.get("elapsed_s", 0.0))
+        torch.set_rng_state(infos["torch_rng_state"])
+        self.adapter.core.rng.bit_generator.state = infos["numpy_rng_state"]
+
+    def close_writer(self) -> None:
+        """Flush and close the TensorBoard writer (the runner leaves a SummaryWriter open)."""
+        writer = self.logger.writer
+        if writer is not None and hasattr(writer, "close"):
+            writer.close()
+
+    def export_final(self, final_model: Path) -> Path:
+        """Copy the latest state to ``final_model`` and export the actor as TorchScript; returns the latter."""
+        state = self.checkpoint_dict()
+        atomic_write(final_model, lambda f: torch.save(state, f))
+        staging = Path(tempfile.mkdtemp(prefix=".export-", dir=self.run_dir))
+        try:  # exported into a private folder, then moved into place (the archive keeps the file's name)
+            with torchscript_export():
+                self.export_policy_to_jit(str(staging), filename=TORCHSCRIPT_FILE)
+            target = self.run_dir / TORCHSCRIPT_FILE
+            os.replace(staging / TORCHSCRIPT_FILE, target)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+        return target
+
+
+def train_rsl(
+    env: RslVecEnv,
+    train_cfg: dict[str, Any],
+    run_dir: Path,
+    device: str,
+    total_iterations: int,
+    checkpoint: Path | None,
+    hooks: RunHooks,
+    final_model: Path,
+) -> tuple[int, bool, Path | None]:
+    """Run (or continue) rsl-rl PPO up to ``total_iterations``; returns (env steps, stopped, TorchScript path).
+
+    The caller seeds torch before calling (the networks are initialised here).
+    """
+    runner = CheckpointingRunner(env, train_cfg, run_dir, device, hooks)
+    if checkpoint is not None:
+        runner.restore(checkpoint)
+    remaining = total_iterations - runner.completed_iterations
+    try:
+        if remaining > 0:
+            with quiet_stdout(not hooks.verbose):  # rsl-rl prints the model and a git note here
+                runner.learn(remaining, init_at_random_ep_len=True)
+    except TrainingStopped:
+        return runner.env_steps, True, None
+    finally:
+        runner.close_writer()
+    return runner.env_steps, False, runner.export_final(final_model)

@@ -1,0 +1,448 @@
+"""``train``: PPO (rsl-rl or Stable-Baselines3) on a margin_rl ANYmal environment.
+
+Examples::
+
+    python -m margin_rl.train.train --env margin_rl/AnymalB-v0 --backend rsl --margin-weight 1.0 --seed 1 \\
+        --num-envs 128 --total-steps 5000000
+    python -m margin_rl.train.train --backend sb3 --margin-weight 0 --run-dir runs/baseline
+    python -m margin_rl.train.train --resume runs/baseline            # continue a stopped or killed run
+    python -m margin_rl.train.train --resume runs/baseline --total-steps 10000000   # ... and extend it
+
+Each run directory (default ``runs/<env>__<backend>__mw<weight>__s<seed>__<time>``) holds ``config.json``
+(environment, PPO and run settings, package versions), TensorBoard events in ``tb/`` (every reward term, the
+margin, base linear/angular acceleration RMS and peak per axis, velocity-tracking error, stance width,
+terminations, throughput), checkpoints in ``checkpoints/`` (every ``--checkpoint-every`` steps, and on
+SIGINT/SIGTERM), and at the end ``final_model.pt|.zip`` plus ``policy_torchscript.pt`` (deterministic actor).
+See :mod:`margin_rl.train.runs` for the layout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from margin_rl.envs.config import EnvConfig
+from margin_rl.train.config import (
+    BACKENDS,
+    PPOConfig,
+    RslPPOConfig,
+    Sb3PPOConfig,
+    apply_overrides,
+    default_ppo_config,
+    from_dict,
+    parse_assignments,
+    to_dict,
+)
+from margin_rl.train.runs import (
+    CONFIG_FILE,
+    PROGRESS_FILE,
+    RunHooks,
+    StopRequest,
+    checkpoint_steps,
+    final_model_name,
+    graceful_stop,
+    latest_checkpoint,
+    read_json,
+    run_name,
+    torch_threads,
+    versions,
+    write_json,
+)
+
+DEFAULT_ENV = "margin_rl/AnymalB-v0"
+DEFAULT_BACKEND = "rsl"
+DEFAULT_SEED = 1
+DEFAULT_NUM_ENVS = 128
+DEFAULT_TOTAL_STEPS = 5_000_000
+DEFAULT_CHECKPOINT_EVERY = 500_000
+
+
+@dataclass(frozen=True)
+class TrainSpec:
+    """Everything that defines a training run (written to ``config.json``)."""
+
+    env_id: str = DEFAULT_ENV
+    backend: str = DEFAULT_BACKEND
+    seed: int = DEFAULT_SEED
+    num_envs: int = DEFAULT_NUM_ENVS
+    total_steps: int = DEFAULT_TOTAL_STEPS  # environment steps (policy steps summed over environments)
+    env_config: EnvConfig = field(default_factory=EnvConfig)
+    ppo: PPOConfig = field(default_factory=RslPPOConfig)
+    checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY  # environment steps between checkpoints
+    device: str = "cpu"  # learner device (the simulation always runs on the CPU)
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        expected = RslPPOConfig if self.backend == "rsl" else Sb3PPOConfig
+        if not isinstance(self.ppo, expected):
+            raise TypeError(f"backend {self.backend!r} needs a {expected.__name__}, got {type(self.ppo).__name__}")
+        for name in ("num_envs", "total_steps", "checkpoint_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+    @property
+    def steps_per_iteration(self) -> int:
+        """Environment steps collected per PPO update."""
+        return self.num_envs * self.ppo.steps_per_env
+
+    @property
+    def total_iterations(self) -> int:
+        """PPO updates needed for ``total_steps`` (rounded up)."""
+        return math.ceil(self.total_steps / self.steps_per_iteration)
+
+    @property
+    def save_interval(self) -> int:
+        """Iterations between checkpoints."""
+        return max(1, round(self.checkpoint_every / self.steps_per_iteration))
+
+    def backend_config(self, run: str = "") -> dict[str, Any]:
+        """The exact settings handed to the backend (the rsl-rl ``train_cfg`` or SB3's PPO keyword arguments)."""
+        if isinstance(self.ppo, RslPPOConfig):
+            return self.ppo.runner_cfg(self.env_config.privileged_observations, self.save_interval, run)
+        kwargs = self.ppo.ppo_kwargs(self.num_envs)
+        policy = dict(kwargs.pop("policy_kwargs"))
+        policy["activation_fn"] = policy["activation_fn"].__name__
+        return {**kwargs, "policy_kwargs": policy}
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "env_id": self.env_id,
+            "backend": self.backend,
+            "seed": self.seed,
+            "num_envs": self.num_envs,
+            "total_steps": self.total_steps,
+            "checkpoint_every": self.checkpoint_every,
+            "device": self.device,
+            "env_config": to_dict(self.env_config),
+            "ppo": to_dict(self.ppo),
+        }
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> TrainSpec:
+        backend = data["backend"]
+        ppo_class = RslPPOConfig if backend == "rsl" else Sb3PPOConfig
+        return cls(
+            env_id=data["env_id"],
+            backend=backend,
+            seed=int(data["seed"]),
+            num_envs=int(data["num_envs"]),
+            total_steps=int(data["total_steps"]),
+            checkpoint_every=int(data["checkpoint_every"]),
+            device=str(data.get("device", "cpu")),
+            env_config=from_dict(EnvConfig, data["env_config"], "env_config"),
+            ppo=from_dict(ppo_class, data["ppo"], "ppo"),
+        )
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """Outcome of :func:`train`."""
+
+    run_dir: Path
+    env_steps: int  # environment steps trained on so far (over every session of the run)
+    finished: bool  # reached total_steps; final_model and torchscript written
+    stopped: bool  # stopped by a signal or request; resumable from `checkpoint`
+    checkpoint: Path | None
+    final_model: Path | None
+    torchscript: Path | None
+    session_steps: int  # steps trained in this call
+    elapsed_s: float  # wall time of this call
+
+    @property
+    def steps_per_second(self) -> float:
+        return self.session_steps / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+
+def make_spec(
+    env_id: str = DEFAULT_ENV,
+    backend: str = DEFAULT_BACKEND,
+    env_overrides: dict[str, Any] | None = None,
+    ppo_overrides: dict[str, Any] | None = None,
+    **run: Any,
+) -> TrainSpec:
+    """A :class:`TrainSpec` from an id, EnvConfig field overrides, PPO field overrides and run settings."""
+    from margin_rl.train.adapters import env_config_for
+
+    env_config = apply_overrides(env_config_for(env_id), dict(env_overrides or {}))
+    ppo = apply_overrides(default_ppo_config(backend), dict(ppo_overrides or {}))
+    return TrainSpec(env_id=env_id, backend=backend, env_config=env_config, ppo=ppo, **run)
+
+
+def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) -> Path:
+    """``config.json``: the spec, the exact backend settings, versions, time and command line.
+
+    A resumed run keeps its first command and start time and lists the later sessions' commands.
+    """
+    now = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    data = {
+        **spec.to_json(),
+        "backend_config": spec.backend_config(run_dir.name),
+        "versions": versions(),
+        "created": now,
+        "command": command if command is not None else [],
+        "sessions": [{"started": now, "command": command if command is not None else []}],
+    }
+    path = run_dir / CONFIG_FILE
+    if path.is_file():
+        previous = read_json(path)
+        data["created"] = previous.get("created", now)
+        data["command"] = previous.get("command", data["command"])
+        data["sessions"] = [*previous.get("sessions", []), *data["sessions"]]
+    return write_json(path, data)
+
+
+def load_spec(run_dir: str | Path) -> TrainSpec:
+    """The spec of an existing run (its ``config.json``)."""
+    return TrainSpec.from_json(read_json(Path(run_dir) / CONFIG_FILE))
+
+
+class _Progress:
+    """tqdm progress bar over environment steps (disabled with ``enabled=False``)."""
+
+    def __init__(self, total: int, initial: int, enabled: bool, label: str) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(
+            total=total,
+            initial=initial,
+            unit="step",
+            unit_scale=True,
+            dynamic_ncols=True,
+            disable=not enabled,
+            desc=label,
+            smoothing=0.1,
+        )
+
+    def update(self, steps: int, mean_return: float | None) -> None:
+        if steps > self.bar.n:
+            self.bar.update(steps - self.bar.n)
+        if mean_return is not None:
+            self.bar.set_postfix_str(f"return {mean_return:.2f}", refresh=False)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def train(
+    spec: TrainSpec,
+    run_dir: str | Path,
+    *,
+    resume: bool = False,
+    progress: bool = True,
+    verbose: bool = False,
+    stop: StopRequest | None = None,
+    on_checkpoint: Any = None,
+    command: list[str] | None = None,
+    threads: int | None = 1,
+) -> TrainResult:
+    """Train (or, with ``resume``, continue from the latest checkpoint of ``run_dir``) one PPO run.
+
+    SIGINT/SIGTERM (or ``stop.request()``) stop at the next safe point with a checkpoint; ``on_checkpoint(path,
+    steps)`` is called after every checkpoint. ``threads``: torch intra-op threads while training (see
+    :func:`margin_rl.train.runs.torch_threads`; None keeps torch's setting). Raises FileExistsError when
+    ``run_dir`` already holds checkpoints and ``resume`` is False.
+    """
+    from margin_rl.train.adapters import check_margin_available
+
+    run_dir = Path(run_dir)
+    check_margin_available(spec.env_config)
+    checkpoint = latest_checkpoint(run_dir)
+    if checkpoint is not None and not resume:
+        raise FileExistsError(f"{run_dir} already holds checkpoints; use --resume to continue it, or another --run-dir")
+    if not resume:
+        checkpoint = None
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_run_config(spec, run_dir, command)
+    start = checkpoint_steps(checkpoint) if checkpoint is not None else 0
+    stop = stop or StopRequest()
+    bar = _Progress(spec.total_iterations * spec.steps_per_iteration, start, progress, f"{spec.backend} {run_dir.name}")
+    latest: list[Path | None] = [checkpoint]
+
+    def checkpointed(path: Path, steps: int) -> None:
+        latest[0] = path
+        write_json(run_dir / PROGRESS_FILE, {"env_steps": steps, "checkpoint": path.name, "finished": False})
+        if on_checkpoint is not None:
+            on_checkpoint(path, steps)
+
+    hooks = RunHooks(lambda: stop.requested, bar.update, checkpointed, verbose)
+    t0 = time.perf_counter()
+    try:
+        with graceful_stop(stop, verbose=True), torch_threads(threads):
+            steps, stopped, torchscript = _run_backend(spec, run_dir, checkpoint, hooks)
+    finally:
+        bar.close()
+    elapsed = time.perf_counter() - t0
+    final = None if stopped else run_dir / final_model_name(spec.backend)
+    write_json(
+        run_dir / PROGRESS_FILE,
+        {
+            "env_steps": steps,
+            "checkpoint": latest[0].name if latest[0] is not None else None,
+            "finished": not stopped,
+            "stopped": stopped,
+            "stop_reason": stop.signal_name if stopped else None,
+            "final_model": final.name if final is not None else None,
+            "torchscript": torchscript.name if torchscript is not None else None,
+            "session_steps_per_s": (steps - start) / elapsed if elapsed > 0 else None,
+        },
+    )
+    return TrainResult(run_dir, steps, not stopped, stopped, latest[0], final, torchscript, steps - start, elapsed)
+
+
+def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks: RunHooks) -> tuple[int, bool, Any]:
+    """Seed, build the core and its adapter, and hand over to the backend."""
+    import torch
+
+    from margin_rl.train.adapters import make_core
+
+    torch.manual_seed(spec.seed)
+    np.random.seed(spec.seed % 2**32)
+    core = make_core(spec.env_config, spec.num_envs, spec.seed)
+    final = run_dir / final_model_name(spec.backend)
+    if isinstance(spec.ppo, RslPPOConfig):
+        from margin_rl.train.adapters import RslVecEnv
+        from margin_rl.train.rsl_backend import train_rsl
+
+        env = RslVecEnv(core)
+        cfg = spec.backend_config(run_dir.name)
+        return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final)
+    from margin_rl.train.adapters import Sb3VecEnv
+    from margin_rl.train.sb3_backend import train_sb3
+
+    venv = Sb3VecEnv(core)
+    total = spec.total_iterations * spec.steps_per_iteration
+    return train_sb3(
+        venv, spec.ppo, run_dir, spec.seed, spec.device, total, spec.checkpoint_every, checkpoint, hooks, final
+    )
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# command line
+# ---------------------------------------------------------------------------------------------------------------------
+def add_env_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options that shape the environment (shared with compare)."""
+    parser.add_argument("--env", default=None, help=f"registered environment id (default {DEFAULT_ENV})")
+    parser.add_argument("--margin", choices=("learned", "analytic", "none"), help="margin used by the env")
+    parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (default: bundled)")
+    parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (default paper)")
+    parser.add_argument(
+        "--env-option",
+        action="append",
+        metavar="KEY=VALUE",
+        help="any EnvConfig field, VALUE in JSON, e.g. command='{\"forward_velocity\": [0.5, 1.0]}' (repeatable)",
+    )
+
+
+def env_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """EnvConfig overrides from the shared environment options."""
+    overrides = parse_assignments(args.env_option, "--env-option")
+    for key in ("margin", "margin_weights", "reward_preset"):
+        if getattr(args, key, None) is not None:
+            overrides[key] = getattr(args, key)
+    if getattr(args, "margin_weight", None) is not None:
+        overrides["margin_weight"] = args.margin_weight
+    return overrides
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="margin-rl-train", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    add_env_arguments(parser)
+    parser.add_argument("--backend", choices=BACKENDS, default=None, help=f"PPO library (default {DEFAULT_BACKEND})")
+    parser.add_argument("--margin-weight", type=float, help="weight of the margin reward term (0: baseline)")
+    parser.add_argument("--seed", type=int, default=None, help=f"random seed (default {DEFAULT_SEED})")
+    parser.add_argument("--num-envs", type=int, default=None, help=f"parallel environments ({DEFAULT_NUM_ENVS})")
+    parser.add_argument("--total-steps", type=int, default=None, help=f"environment steps ({DEFAULT_TOTAL_STEPS})")
+    parser.add_argument(
+        "--checkpoint-every", type=int, default=None, help=f"steps between checkpoints ({DEFAULT_CHECKPOINT_EVERY})"
+    )
+    parser.add_argument("--ppo-option", action="append", metavar="KEY=VALUE", help="PPO config field (repeatable)")
+    parser.add_argument("--run-dir", type=Path, help="run directory (default: <runs-root>/<generated name>)")
+    parser.add_argument("--runs-root", type=Path, default=Path("runs"), help="parent of generated run directories")
+    parser.add_argument(
+        "--resume",
+        type=Path,
+        metavar="RUN_DIR",
+        help="continue this run from its latest checkpoint (its config.json; --total-steps may extend it)",
+    )
+    parser.add_argument("--device", default=None, help="learner device, e.g. cpu or cuda (default cpu)")
+    parser.add_argument(
+        "--torch-threads", type=int, default=1, help="torch intra-op threads (default 1: leaves the cores to MuJoCo)"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--verbose", action="store_true", help="also print the backend's own logs")
+    return parser
+
+
+def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
+    """(spec, run directory, resume) from parsed arguments."""
+    if args.resume is not None:
+        spec = load_spec(args.resume)
+        changes = {k: v for k, v in (("total_steps", args.total_steps), ("device", args.device)) if v is not None}
+        if changes:
+            spec = TrainSpec.from_json({**spec.to_json(), **changes})
+        return spec, args.resume, True
+    backend = args.backend or DEFAULT_BACKEND
+    env_id = args.env or DEFAULT_ENV
+    run = {
+        "seed": DEFAULT_SEED if args.seed is None else args.seed,
+        "num_envs": args.num_envs or DEFAULT_NUM_ENVS,
+        "total_steps": args.total_steps or DEFAULT_TOTAL_STEPS,
+        "checkpoint_every": args.checkpoint_every or DEFAULT_CHECKPOINT_EVERY,
+        "device": args.device or "cpu",
+    }
+    spec = make_spec(env_id, backend, env_overrides(args), parse_assignments(args.ppo_option, "--ppo-option"), **run)
+    run_dir = args.run_dir or args.runs_root / run_name(env_id, backend, spec.env_config.margin_weight, spec.seed)
+    return spec, run_dir, False
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns 0 when the run finished, 128 + signal number when it was stopped."""
+    import signal
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        spec, run_dir, resume = spec_from_args(args)
+        from margin_rl.train.adapters import check_margin_available
+
+        check_margin_available(spec.env_config)
+    except (ValueError, TypeError, FileNotFoundError) as exc:
+        parser.error(str(exc))
+    command = list(sys.argv if argv is None else ["margin-rl-train", *argv])
+    stop = StopRequest()
+    try:
+        result = train(
+            spec,
+            run_dir,
+            resume=resume,
+            progress=not args.no_progress,
+            verbose=args.verbose,
+            stop=stop,
+            command=command,
+            threads=args.torch_threads,
+        )
+    except FileExistsError as exc:
+        parser.error(str(exc))
+    rate = f"{result.steps_per_second:,.0f} steps/s"
+    if result.stopped:
+        print(f"stopped at {result.env_steps:,} steps ({rate}); checkpoint {result.checkpoint}")
+        print(f"resume with: python -m margin_rl.train.train --resume {result.run_dir}")
+        signum = getattr(signal.Signals, stop.signal_name, None) if stop.signal_name else None
+        return 128 + int(signum) if signum is not None else 1
+    print(f"finished {result.env_steps:,} steps ({rate}) in {result.run_dir}")
+    print(f"final model {result.final_model}; TorchScript actor {result.torchscript}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -167,7 +167,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from margin_rl.robot import Robot
 from margin_rl.stability.analytic import ContactProblem, contact_problem
-from margin_rl.stability.region import _as_array, _check_finite, _positive_scalar, _tangent_bases, _torque_bounds
+from margin_rl.stability.region import (
+    _as_array,
+    _check_finite,
+    _positive_scalar,
+    _settings,
+    _tangent_bases,
+    validate_contact_arrays,
+)
 
 __all__ = [
     "DEFAULT_N_FACES",
@@ -801,35 +808,13 @@ def feasible_wrench_polytope(
         On malformed inputs; the message names the argument.
     """
     t0 = time.perf_counter()
-    try:
-        pts_all = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("points must be a numeric (n, 3) array") from exc
-    if pts_all.ndim != 2 or pts_all.shape[1] != 3:
-        raise ValueError(f"points must have shape (n, 3), got {pts_all.shape}")
-    n_all = pts_all.shape[0]
-    nrm_all = _as_array("normals", normals, (n_all, 3))
-    stance_a = np.asarray(stance)
-    if stance_a.shape != (n_all,):
-        raise ValueError(f"stance must have shape ({n_all},), got {stance_a.shape}")
-    if stance_a.dtype != np.bool_:
-        if not np.issubdtype(stance_a.dtype, np.integer) or np.any((stance_a != 0) & (stance_a != 1)):
-            raise ValueError("stance must be boolean (or 0/1 integers)")
-        stance_a = stance_a.astype(bool)
+    pts_all, nrm_all, _, jac_all, lo, hi, bias_all, idx = validate_contact_arrays(
+        points, normals, stance, jacobians, torque_limits, leg_bias, points_name="points", min_joints=3
+    )
     mu_v = _positive_scalar("mu", mu)
     k_faces = _check_n_faces(n_faces)
-    try:
-        jac_all = np.asarray(jacobians, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("jacobians must be a numeric (n, 3, k) array") from exc
-    if jac_all.ndim != 3 or jac_all.shape[:2] != (n_all, 3) or jac_all.shape[2] < 3:
-        raise ValueError(f"jacobians must have shape ({n_all}, 3, k) with k >= 3, got {jac_all.shape}")
-    k_joints = jac_all.shape[2]
-    idx = np.flatnonzero(stance_a)
-    lo, hi = _torque_bounds(torque_limits, n_all, k_joints, idx)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise ValueError("torque_limits must be finite for stance legs (the FWP would be unbounded)")
-    bias_all = np.zeros((n_all, k_joints)) if leg_bias is None else _as_array("leg_bias", leg_bias, (n_all, k_joints))
 
     pts = pts_all[idx]
     _check_finite("points", pts)
@@ -962,20 +947,9 @@ def gravito_inertial_wrench(
 # --------------------------------------------------------------------------------------------
 
 
-def _lp_settings(robust: bool) -> Any:
-    s = clarabel.DefaultSettings()
-    s.verbose = False
-    s.presolve_enable = False
-    s.max_iter = 200
-    s.tol_gap_abs = 1e-9
-    s.tol_gap_rel = 1e-9
-    s.tol_feas = 1e-9
-    s.iterative_refinement_enable = robust
-    return s
-
-
-_SETTINGS_FAST = _lp_settings(robust=False)
-_SETTINGS_ROBUST = _lp_settings(robust=True)
+# Tighter than the region's programs: s is read off directly rather than as a polygon vertex.
+_SETTINGS_FAST = _settings(robust=False, tol=1e-9, max_iter=200)
+_SETTINGS_ROBUST = _settings(robust=True, tol=1e-9, max_iter=200)
 # Interior-point infeasibility certificates are reliable: not retried.
 _INFEASIBLE = (clarabel.SolverStatus.PrimalInfeasible, clarabel.SolverStatus.AlmostPrimalInfeasible)
 

@@ -900,7 +900,7 @@ def _build_problem(
     return _Problem(_dense_to_csc(a), b, cones, n_var)
 
 
-def _settings(robust: bool) -> Any:
+def _settings(robust: bool, tol: float = 1e-8, max_iter: int = 100) -> Any:
     """Clarabel settings: the fast ones, or the robust fallback (iterative refinement on).
 
     Iterative refinement of the KKT solves costs ~1/3 of the solve time on these tiny problems
@@ -911,10 +911,10 @@ def _settings(robust: bool) -> Any:
     s.verbose = False
     # No presolve: the data contain no infinite bounds, and presolve may forbid data updates.
     s.presolve_enable = False
-    s.max_iter = 100
-    s.tol_gap_abs = 1e-8
-    s.tol_gap_rel = 1e-8
-    s.tol_feas = 1e-8
+    s.max_iter = max_iter
+    s.tol_gap_abs = tol
+    s.tol_gap_rel = tol
+    s.tol_feas = tol
     s.iterative_refinement_enable = robust
     return s
 
@@ -993,6 +993,52 @@ def _empty(status: str, t0: float, message: str, n_lps: int = 0) -> FeasibleRegi
         gap=math.nan,
         message=message,
     )
+
+
+def validate_contact_arrays(
+    points: ArrayLike,
+    normals: ArrayLike,
+    stance: ArrayLike,
+    jacobians: ArrayLike,
+    torque_limits: ArrayLike | tuple[ArrayLike, ArrayLike],
+    leg_bias: ArrayLike | None,
+    points_name: str = "feet",
+    min_joints: int = 1,
+) -> tuple[FloatArray, FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray]:
+    """Shared input checks of the contact-based criteria (feasible region, wrench polytope).
+
+    Returns ``(points, normals, stance, jacobians, torque_lo, torque_hi, leg_bias, stance_indices)``
+    with all n contacts (arrays of stance feet are checked further by each caller).
+
+    Raises:
+        ValueError: naming the malformed argument.
+    """
+    try:
+        pts = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{points_name} must be a numeric (n, 3) array") from exc
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"{points_name} must have shape (n, 3), got {np.shape(pts)}")
+    n_all = pts.shape[0]
+    nrm = _as_array("normals", normals, (n_all, 3))
+    stance_a = np.asarray(stance)
+    if stance_a.shape != (n_all,):
+        raise ValueError(f"stance must have shape ({n_all},), got {stance_a.shape}")
+    if stance_a.dtype != np.bool_:
+        if not np.issubdtype(stance_a.dtype, np.integer) or np.any((stance_a != 0) & (stance_a != 1)):
+            raise ValueError("stance must be boolean (or 0/1 integers)")
+        stance_a = stance_a.astype(bool)
+    try:
+        jac = np.asarray(jacobians, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError("jacobians must be a numeric (n, 3, k) array") from exc
+    if jac.ndim != 3 or jac.shape[:2] != (n_all, 3) or jac.shape[2] < min_joints:
+        raise ValueError(f"jacobians must have shape ({n_all}, 3, k) with k >= {min_joints}, got {jac.shape}")
+    k = jac.shape[2]
+    idx = np.flatnonzero(stance_a)
+    lo, hi = _torque_bounds(torque_limits, n_all, k, idx)
+    bias = np.zeros((n_all, k)) if leg_bias is None else _as_array("leg_bias", leg_bias, (n_all, k))
+    return pts, nrm, stance_a, jac, lo, hi, bias, idx
 
 
 def feasible_region(
@@ -1081,21 +1127,9 @@ def feasible_region(
         On malformed inputs; the message names the argument.
     """
     t0 = time.perf_counter()
-    try:
-        feet_a = np.asarray(feet, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("feet must be a numeric (n, 3) array") from exc
-    if feet_a.ndim != 2 or feet_a.shape[1] != 3:
-        raise ValueError(f"feet must have shape (n, 3), got {np.shape(feet_a)}")
-    n_all = feet_a.shape[0]
-    normals_a = _as_array("normals", normals, (n_all, 3))
-    stance_a = np.asarray(stance)
-    if stance_a.shape != (n_all,):
-        raise ValueError(f"stance must have shape ({n_all},), got {stance_a.shape}")
-    if stance_a.dtype != np.bool_:
-        if not np.issubdtype(stance_a.dtype, np.integer) or np.any((stance_a != 0) & (stance_a != 1)):
-            raise ValueError("stance must be boolean (or 0/1 integers)")
-        stance_a = stance_a.astype(bool)
+    feet_a, normals_a, _, jac_a, lo, hi, bias, idx = validate_contact_arrays(
+        feet, normals, stance, jacobians, torque_limits, leg_bias, points_name="feet"
+    )
     mu_v = _positive_scalar("mu", mu)
     mass_v = _positive_scalar("mass", mass)
     g_v = _positive_scalar("gravity", gravity)
@@ -1105,16 +1139,6 @@ def feasible_region(
     if isinstance(max_lps, bool) or not isinstance(max_lps, (int, np.integer)) or max_lps < 4:
         raise ValueError(f"max_lps must be an integer >= 4, got {max_lps!r}")
     n_faces = _parse_friction(friction)
-    try:
-        jac_a = np.asarray(jacobians, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("jacobians must be a numeric (n, 3, k) array") from exc
-    if jac_a.ndim != 3 or jac_a.shape[:2] != (n_all, 3) or jac_a.shape[2] < 1:
-        raise ValueError(f"jacobians must have shape ({n_all}, 3, k) with k >= 1, got {jac_a.shape}")
-    k = jac_a.shape[2]
-    idx = np.flatnonzero(stance_a)
-    lo, hi = _torque_bounds(torque_limits, n_all, k, idx)
-    bias = np.zeros((n_all, k)) if leg_bias is None else _as_array("leg_bias", leg_bias, (n_all, k))
     vec = {}
     for name, value in (
         ("com_acc", com_acc),

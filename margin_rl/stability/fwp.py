@@ -170,6 +170,7 @@ from margin_rl.stability.analytic import ContactProblem, contact_problem
 from margin_rl.stability.region import (
     _as_array,
     _check_finite,
+    _frozen,
     _positive_scalar,
     _settings,
     _tangent_bases,
@@ -231,12 +232,6 @@ _SPAN_TOL = 1e-9
 # --------------------------------------------------------------------------------------------
 # Results
 # --------------------------------------------------------------------------------------------
-
-
-def _frozen(a: ArrayLike, dtype: Any = np.float64) -> Any:
-    out = np.array(a, dtype=dtype)
-    out.flags.writeable = False
-    return out
 
 
 @dataclass(frozen=True)

@@ -191,8 +191,9 @@ _INFEASIBLE = (clarabel.SolverStatus.PrimalInfeasible, clarabel.SolverStatus.Alm
 FloatArray = NDArray[np.float64]
 
 
-def _frozen(a: ArrayLike) -> FloatArray:
-    out = np.array(a, dtype=np.float64)
+def _frozen(a: ArrayLike, dtype: Any = np.float64) -> Any:
+    """A read-only copy (results are frozen dataclasses; their arrays must not change either)."""
+    out = np.array(a, dtype=dtype)
     out.flags.writeable = False
     return out
 

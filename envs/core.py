@@ -27,6 +27,7 @@ Per policy step (``decimation`` physics steps at the MJCF timestep):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,6 +49,14 @@ from margin_rl.stability.lambda_state import LAMBDA_DIM, StabilityState
 
 MARGIN_CLIP: tuple[float, float] = (-0.5, 0.5)
 """Range [m] the margin term is clipped to (the learned model extrapolates outside its data)."""
+
+
+def _or_nan(evaluate: Callable[[], float]) -> float:
+    """A per-environment margin, NaN where its state is invalid (e.g. a diverged simulation's lambda)."""
+    try:
+        return float(evaluate())
+    except ValueError:
+        return float("nan")
 
 
 def heading_rotation(base_rotation: np.ndarray) -> np.ndarray:
@@ -228,14 +237,14 @@ class AnymalCore:
 
             def fwp(lam: np.ndarray) -> np.ndarray:
                 # s <= 1 is dimensionless (a relative depth in the wrench polytope), not a distance.
-                values = np.array([fwp_feasibility(self.robot, x).s for x in lam])
+                values = np.array([_or_nan(lambda x=x: fwp_feasibility(self.robot, x).s) for x in lam])
                 return np.where(np.isfinite(values), values, MARGIN_CLIP[0])
 
             return fwp
         from margin_rl.stability.analytic import analytic_margin
 
         def analytic(lam: np.ndarray) -> np.ndarray:
-            values = np.array([analytic_margin(self.robot, x).margin for x in lam])
+            values = np.array([_or_nan(lambda x=x: analytic_margin(self.robot, x).margin) for x in lam])
             return np.where(np.isfinite(values), values, MARGIN_CLIP[0])
 
         return analytic

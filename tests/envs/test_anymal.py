@@ -265,3 +265,11 @@ def test_fwp_factor_as_the_margin_term() -> None:
         info = env.step(np.zeros(12))[4]
     assert 0.0 < info["margin"] <= 1.0  # standing: strictly inside the feasible wrench polytope
     assert info["reward_margin"] == pytest.approx(info["margin"])
+
+
+def test_diverged_state_does_not_crash_the_analytic_margin_mode() -> None:
+    env = gym.make("margin_rl/AnymalB-v0", margin="analytic")
+    env.reset(seed=0)
+    env.unwrapped.core._qvel[0, :] = np.nan
+    _, reward, terminated, _, info = env.step(np.zeros(12))
+    assert terminated and info["diverged"] == 1.0 and np.isfinite(reward)

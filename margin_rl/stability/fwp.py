@@ -174,6 +174,7 @@ from margin_rl.stability.region import (
     _positive_scalar,
     _settings,
     _tangent_bases,
+    gravito_inertial_wrench,
     validate_contact_arrays,
 )
 
@@ -881,60 +882,6 @@ def feasible_wrench_polytope(
 # --------------------------------------------------------------------------------------------
 # Gravito-inertial wrench (eq. 14-15)
 # --------------------------------------------------------------------------------------------
-
-
-def gravito_inertial_wrench(
-    mass: float,
-    com_acc: ArrayLike = (0.0, 0.0, 0.0),
-    ang_momentum_rate: ArrayLike = (0.0, 0.0, 0.0),
-    ext_force: ArrayLike = (0.0, 0.0, 0.0),
-    ext_torque: ArrayLike = (0.0, 0.0, 0.0),
-    gravity: float = 9.81,
-    com: ArrayLike = (0.0, 0.0, 0.0),
-) -> FloatArray:
-    r"""Wrench :math:`w_{GI} = \dot h - w_G - w_{ext}` the contacts must produce (eq. 14-15), frame H.
-
-    See the module docstring for the derivation: with :math:`F = m(\ddot c - \vec g) - f_{ext}`,
-    :math:`w_{GI} = (F,\ \dot L - \tau_{ext} + c \times F)`, moments about the origin of H.
-
-    Parameters
-    ----------
-    mass : float
-        Total mass [kg] (> 0).
-    com_acc : (3,) array_like
-        CoM acceleration [m/s^2].
-    ang_momentum_rate : (3,) array_like
-        Rate of centroidal angular momentum :math:`\dot L` [N m].
-    ext_force, ext_torque : (3,) array_like
-        External wrench on the robot, force applied at the CoM [N], [N m].
-    gravity : float
-        Gravity magnitude [m/s^2] (> 0); gravity is (0, 0, -g) in H.
-    com : (3,) array_like
-        CoM position [m] relative to the moment reference (zero: moments about the CoM, which is how
-        :func:`fwp_feasibility` and the feasible region use it). A non-zero ``com`` evaluates the
-        state with the CoM displaced by ``com`` and everything else fixed.
-
-    Returns
-    -------
-    (6,) ndarray
-        ``(force, moment)`` [N, N m].
-    """
-    m = _positive_scalar("mass", mass)
-    g = _positive_scalar("gravity", gravity)
-    vec = {}
-    for name, value in (
-        ("com_acc", com_acc),
-        ("ang_momentum_rate", ang_momentum_rate),
-        ("ext_force", ext_force),
-        ("ext_torque", ext_torque),
-        ("com", com),
-    ):
-        arr = _as_array(name, value, (3,))
-        _check_finite(name, arr)
-        vec[name] = arr
-    force = m * (vec["com_acc"] - np.array([0.0, 0.0, -g])) - vec["ext_force"]
-    moment = vec["ang_momentum_rate"] - vec["ext_torque"] + np.cross(vec["com"], force)
-    return np.concatenate([force, moment])
 
 
 # --------------------------------------------------------------------------------------------

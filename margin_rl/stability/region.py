@@ -996,6 +996,60 @@ def _empty(status: str, t0: float, message: str, n_lps: int = 0) -> FeasibleRegi
     )
 
 
+def gravito_inertial_wrench(
+    mass: float,
+    com_acc: ArrayLike = (0.0, 0.0, 0.0),
+    ang_momentum_rate: ArrayLike = (0.0, 0.0, 0.0),
+    ext_force: ArrayLike = (0.0, 0.0, 0.0),
+    ext_torque: ArrayLike = (0.0, 0.0, 0.0),
+    gravity: float = 9.81,
+    com: ArrayLike = (0.0, 0.0, 0.0),
+) -> FloatArray:
+    r"""Wrench :math:`w_{GI} = \dot h - w_G - w_{ext}` the contacts must produce (eq. 14-15), frame H.
+
+    See the module docstring for the derivation: with :math:`F = m(\ddot c - \vec g) - f_{ext}`,
+    :math:`w_{GI} = (F,\ \dot L - \tau_{ext} + c \times F)`, moments about the origin of H.
+
+    Parameters
+    ----------
+    mass : float
+        Total mass [kg] (> 0).
+    com_acc : (3,) array_like
+        CoM acceleration [m/s^2].
+    ang_momentum_rate : (3,) array_like
+        Rate of centroidal angular momentum :math:`\dot L` [N m].
+    ext_force, ext_torque : (3,) array_like
+        External wrench on the robot, force applied at the CoM [N], [N m].
+    gravity : float
+        Gravity magnitude [m/s^2] (> 0); gravity is (0, 0, -g) in H.
+    com : (3,) array_like
+        CoM position [m] relative to the moment reference (zero: moments about the CoM, which is how
+        :func:`fwp_feasibility` and the feasible region use it). A non-zero ``com`` evaluates the
+        state with the CoM displaced by ``com`` and everything else fixed.
+
+    Returns
+    -------
+    (6,) ndarray
+        ``(force, moment)`` [N, N m].
+    """
+    m = _positive_scalar("mass", mass)
+    g = _positive_scalar("gravity", gravity)
+    vec = {}
+    for name, value in (
+        ("com_acc", com_acc),
+        ("ang_momentum_rate", ang_momentum_rate),
+        ("ext_force", ext_force),
+        ("ext_torque", ext_torque),
+        ("com", com),
+    ):
+        arr = _as_array(name, value, (3,))
+        _check_finite(name, arr)
+        vec[name] = arr
+    force = m * (vec["com_acc"] - np.array([0.0, 0.0, -g])) - vec["ext_force"]
+    moment = vec["ang_momentum_rate"] - vec["ext_torque"] + np.cross(vec["com"], force)
+    return np.concatenate([force, moment])
+
+
 def validate_contact_arrays(
     points: ArrayLike,
     normals: ArrayLike,
@@ -1132,24 +1186,13 @@ def feasible_region(
         feet, normals, stance, jacobians, torque_limits, leg_bias, points_name="feet"
     )
     mu_v = _positive_scalar("mu", mu)
-    mass_v = _positive_scalar("mass", mass)
-    g_v = _positive_scalar("gravity", gravity)
     tol_v = _positive_scalar("tol", tol)
     w_max = _positive_scalar("contact_torque_limit", contact_torque_limit, allow_zero=True)
     extent_v = _positive_scalar("extent", extent)
     if isinstance(max_lps, bool) or not isinstance(max_lps, (int, np.integer)) or max_lps < 4:
         raise ValueError(f"max_lps must be an integer >= 4, got {max_lps!r}")
     n_faces = _parse_friction(friction)
-    vec = {}
-    for name, value in (
-        ("com_acc", com_acc),
-        ("ang_momentum_rate", ang_momentum_rate),
-        ("ext_force", ext_force),
-        ("ext_torque", ext_torque),
-    ):
-        arr = _as_array(name, value, (3,))
-        _check_finite(name, arr)
-        vec[name] = arr
+    wrench = gravito_inertial_wrench(mass, com_acc, ang_momentum_rate, ext_force, ext_torque, gravity)
 
     # Only stance feet enter the problem; their data must be finite.
     if idx.size == 0:
@@ -1167,9 +1210,7 @@ def feasible_region(
     bias_s = bias[idx]
     _check_finite("leg_bias", bias_s)
 
-    g_vec = np.array([0.0, 0.0, -g_v])
-    force = mass_v * (vec["com_acc"] - g_vec) - vec["ext_force"]
-    moment = vec["ang_momentum_rate"] - vec["ext_torque"]
+    force, moment = wrench[:3], wrench[3:]
     prob = _build_problem(feet_s, nrm, mu_v, jac_s, lo, hi, bias_s, force, moment, n_faces, w_max, extent_v)
 
     oracle = _SupportOracle(prob)

@@ -804,27 +804,15 @@ def feasible_wrench_polytope(
         On malformed inputs; the message names the argument.
     """
     t0 = time.perf_counter()
-    pts_all, nrm_all, _, jac_all, lo, hi, bias_all, idx = validate_contact_arrays(
+    pts, nrm, jac, lo, hi, bias, idx = validate_contact_arrays(
         points, normals, stance, jacobians, torque_limits, leg_bias, points_name="points", min_joints=3
     )
     mu_v = _positive_scalar("mu", mu)
     k_faces = _check_n_faces(n_faces)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise ValueError("torque_limits must be finite for stance legs (the FWP would be unbounded)")
-
-    pts = pts_all[idx]
-    _check_finite("points", pts)
-    nrm = nrm_all[idx]
-    _check_finite("normals", nrm)
-    lengths = np.linalg.norm(nrm, axis=1)
-    if np.any(lengths < 1e-9):
-        raise ValueError("normals must be non-zero for stance contacts")
-    nrm = nrm / lengths[:, None]
-    jac = jac_all[idx]
     for i in range(idx.size):
         _check_jacobian(jac[i], f"jacobians[{idx[i]}]")
-    bias = bias_all[idx]
-    _check_finite("leg_bias", bias)
     ell = max(0.1, float(np.max(np.linalg.norm(pts, axis=1), initial=0.0)))
 
     # Eq. (3), (8), (10), (11): per-contact sets, in 3-D.

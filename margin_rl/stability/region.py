@@ -1059,11 +1059,12 @@ def validate_contact_arrays(
     leg_bias: ArrayLike | None,
     points_name: str = "feet",
     min_joints: int = 1,
-) -> tuple[FloatArray, FloatArray, np.ndarray, FloatArray, FloatArray, FloatArray, FloatArray, np.ndarray]:
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.intp]]:
     """Shared input checks of the contact-based criteria (feasible region, wrench polytope).
 
-    Returns ``(points, normals, stance, jacobians, torque_lo, torque_hi, leg_bias, stance_indices)``
-    with all n contacts (arrays of stance feet are checked further by each caller).
+    Shapes are checked for all n contacts; values only for the stance contacts, whose rows are
+    returned: ``(points, unit normals, jacobians, torque_lo, torque_hi, leg_bias, stance_indices)``
+    (swing rows may hold anything, even NaN).
 
     Raises:
         ValueError: naming the malformed argument.
@@ -1093,7 +1094,19 @@ def validate_contact_arrays(
     idx = np.flatnonzero(stance_a)
     lo, hi = _torque_bounds(torque_limits, n_all, k, idx)
     bias = np.zeros((n_all, k)) if leg_bias is None else _as_array("leg_bias", leg_bias, (n_all, k))
-    return pts, nrm, stance_a, jac, lo, hi, bias, idx
+
+    pts_s = pts[idx]
+    _check_finite(points_name, pts_s)
+    nrm_s = nrm[idx]
+    _check_finite("normals", nrm_s)
+    lengths = np.linalg.norm(nrm_s, axis=1)
+    if np.any(lengths < 1e-9):
+        raise ValueError("normals must be non-zero for stance contacts")
+    jac_s = jac[idx]
+    _check_finite("jacobians", jac_s)
+    bias_s = bias[idx]
+    _check_finite("leg_bias", bias_s)
+    return pts_s, nrm_s / lengths[:, None], jac_s, lo, hi, bias_s, idx
 
 
 def feasible_region(
@@ -1182,7 +1195,7 @@ def feasible_region(
         On malformed inputs; the message names the argument.
     """
     t0 = time.perf_counter()
-    feet_a, normals_a, _, jac_a, lo, hi, bias, idx = validate_contact_arrays(
+    feet_s, nrm, jac_s, lo, hi, bias_s, idx = validate_contact_arrays(
         feet, normals, stance, jacobians, torque_limits, leg_bias, points_name="feet"
     )
     mu_v = _positive_scalar("mu", mu)
@@ -1194,22 +1207,9 @@ def feasible_region(
     n_faces = _parse_friction(friction)
     wrench = gravito_inertial_wrench(mass, com_acc, ang_momentum_rate, ext_force, ext_torque, gravity)
 
-    # Only stance feet enter the problem; their data must be finite.
+    # Only stance feet enter the problem (validated above).
     if idx.size == 0:
         return _empty("empty", t0, "no stance foot")
-    feet_s = feet_a[idx]
-    _check_finite("feet", feet_s)
-    nrm = normals_a[idx]
-    _check_finite("normals", nrm)
-    nrm_len = np.linalg.norm(nrm, axis=1)
-    if np.any(nrm_len < 1e-9):
-        raise ValueError("normals must be non-zero for stance feet")
-    nrm = nrm / nrm_len[:, None]
-    jac_s = jac_a[idx]
-    _check_finite("jacobians", jac_s)
-    bias_s = bias[idx]
-    _check_finite("leg_bias", bias_s)
-
     force, moment = wrench[:3], wrench[3:]
     prob = _build_problem(feet_s, nrm, mu_v, jac_s, lo, hi, bias_s, force, moment, n_faces, w_max, extent_v)
 

@@ -169,6 +169,7 @@ from margin_rl.robot import Robot
 from margin_rl.stability.analytic import ContactProblem, contact_problem
 from margin_rl.stability.region import (
     _as_array,
+    _as_rows,
     _check_finite,
     _frozen,
     _positive_scalar,
@@ -620,12 +621,7 @@ def contact_wrench_vertices(point: ArrayLike, force_vertices: ArrayLike) -> Floa
     """
     p = _as_array("point", point, (3,))
     _check_finite("point", p)
-    try:
-        f = np.asarray(force_vertices, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("force_vertices must be a numeric (m, 3) array") from exc
-    if f.ndim != 2 or f.shape[1] != 3:
-        raise ValueError(f"force_vertices must have shape (m, 3), got {f.shape}")
+    f = _as_rows("force_vertices", force_vertices, 3, rows="m")
     _check_finite("force_vertices", f)
     return np.hstack([f, np.cross(p, f)])
 
@@ -972,12 +968,7 @@ def feasibility_factor(
         their affine hull, or if ``center`` is not interior and the wrench is not in the cone of the
         centred vertices.
     """
-    try:
-        v = np.asarray(vertices, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("vertices must be a numeric (V, 6) array") from exc
-    if v.ndim != 2 or v.shape[1] != 6 or v.shape[0] == 0:
-        raise ValueError(f"vertices must have shape (V, 6) with V >= 1, got {v.shape}")
+    v = _as_rows("vertices", vertices, 6, rows="V", min_rows=1)
     _check_finite("vertices", v)
     w = _as_array("wrench", wrench, (6,))
     _check_finite("wrench", w)
@@ -1170,12 +1161,7 @@ def fwp_halfspaces(vertices: ArrayLike, length_scale: float) -> FloatArray:
     """
     from scipy.spatial import ConvexHull  # local: only this function needs qhull
 
-    try:
-        v = np.asarray(vertices, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("vertices must be a numeric (V, 6) array") from exc
-    if v.ndim != 2 or v.shape[1] != 6 or v.shape[0] < 7:
-        raise ValueError(f"vertices must have shape (V, 6) with V >= 7, got {v.shape}")
+    v = _as_rows("vertices", vertices, 6, rows="V", min_rows=7)
     _check_finite("vertices", v)
     ell = _positive_scalar("length_scale", length_scale)
     h = _homogeniser(ell)
@@ -1212,12 +1198,7 @@ def halfspace_margin(halfspaces: ArrayLike, wrench: ArrayLike, length_scale: flo
         Positive inside (largest disturbance, in newtons of equivalent force, that keeps the wrench
         feasible), zero on the boundary, negative outside (largest facet violation, not a distance).
     """
-    try:
-        hs = np.asarray(halfspaces, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("halfspaces must be a numeric (h, 7) array") from exc
-    if hs.ndim != 2 or hs.shape[1] != 7 or hs.shape[0] == 0:
-        raise ValueError(f"halfspaces must have shape (h, 7) with h >= 1, got {hs.shape}")
+    hs = _as_rows("halfspaces", halfspaces, 7, rows="h", min_rows=1)
     _check_finite("halfspaces", hs)
     w = _as_array("wrench", wrench, (6,))
     _check_finite("wrench", w)

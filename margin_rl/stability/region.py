@@ -689,6 +689,18 @@ def _as_array(name: str, value: ArrayLike, shape: tuple[int, ...]) -> FloatArray
     return arr
 
 
+def _as_rows(name: str, value: ArrayLike, columns: int, rows: str = "n", min_rows: int = 0) -> FloatArray:
+    """A (rows, columns) float array with at least ``min_rows`` rows; the message names ``name``."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric ({rows}, {columns}) array") from exc
+    if arr.ndim != 2 or arr.shape[1] != columns or arr.shape[0] < min_rows:
+        at_least = f" with {rows} >= {min_rows}" if min_rows else ""
+        raise ValueError(f"{name} must have shape ({rows}, {columns}){at_least}, got {np.shape(arr)}")
+    return arr
+
+
 def _check_finite(name: str, arr: FloatArray) -> None:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite (no NaN/inf)")
@@ -1069,12 +1081,7 @@ def validate_contact_arrays(
     Raises:
         ValueError: naming the malformed argument.
     """
-    try:
-        pts = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{points_name} must be a numeric (n, 3) array") from exc
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"{points_name} must have shape (n, 3), got {np.shape(pts)}")
+    pts = _as_rows(points_name, points, 3)
     n_all = pts.shape[0]
     nrm = _as_array("normals", normals, (n_all, 3))
     stance_a = np.asarray(stance)

@@ -43,10 +43,9 @@ from margin_rl import load_robot  # noqa: E402
 from margin_rl.robot import Robot  # noqa: E402
 from margin_rl.stability.analytic import ContactProblem, contact_problem  # noqa: E402
 from margin_rl.stability.fwp import (  # noqa: E402
+    contact_problem_polytope,
     feasibility_factor,
-    feasible_wrench_polytope,
     fwp_feasibility,
-    gravito_inertial_wrench,
     minkowski_feasibility_factor,
 )
 from margin_rl.stability.lambda_state import StabilityState  # noqa: E402
@@ -97,19 +96,8 @@ def measure(robot: Robot, lam: np.ndarray, n_faces: int) -> dict[str, Any]:
     """One pass over every step; times in ms."""
     problem = contact_problem(robot, lam)
     assert isinstance(problem, ContactProblem)
-    fwp = feasible_wrench_polytope(
-        problem.contact_points,
-        problem.normals,
-        problem.stance,
-        problem.mu,
-        problem.jacobians,
-        problem.torque_limits,
-        problem.leg_bias,
-        n_faces=n_faces,
-    )
-    w = gravito_inertial_wrench(
-        problem.mass, problem.com_acc, problem.ang_momentum_rate, problem.ext_force, problem.ext_torque, problem.gravity
-    )
+    fwp = contact_problem_polytope(problem, n_faces=n_faces)
+    w = problem.gravito_inertial_wrench()
     on_vertices = feasibility_factor(fwp.vertices, w, center=fwp.center, length_scale=fwp.length_scale)
     primal = feasibility_factor(fwp.vertices, w, center=fwp.center, length_scale=fwp.length_scale, dual=False)
     on_summands = minkowski_feasibility_factor(fwp, w)

@@ -60,6 +60,7 @@ from margin_rl.stability.region import (
     DEFAULT_TOL,
     FeasibleRegion,
     feasible_region,
+    gravito_inertial_wrench,
 )
 
 STATUSES: tuple[str, ...] = ("ok", "unreachable", "infeasible", "no_contact", "solver_error")
@@ -159,6 +160,12 @@ class ContactProblem:
     capture_point: np.ndarray  # (2,) ICP relative to the CoM [m], eq. (5)
     joint_pos: np.ndarray  # (12,) [rad]
     base_rotation: np.ndarray  # (3, 3) R_HB
+
+    def gravito_inertial_wrench(self) -> np.ndarray:
+        """(6,) wrench [N, N m] the contacts must produce, about the CoM in H (seed 004 eq. 14-15)."""
+        return gravito_inertial_wrench(
+            self.mass, self.com_acc, self.ang_momentum_rate, self.ext_force, self.ext_torque, self.gravity
+        )
 
 
 def contact_problem(

@@ -186,6 +186,7 @@ __all__ = [
     "FeasibilityResult",
     "FeasibleWrenchPolytope",
     "bounded_friction_cone",
+    "contact_problem_polytope",
     "contact_wrench_vertices",
     "feasibility_factor",
     "feasible_wrench_polytope",
@@ -1215,6 +1216,26 @@ def halfspace_margin(halfspaces: ArrayLike, wrench: ArrayLike, length_scale: flo
 # --------------------------------------------------------------------------------------------
 
 
+def contact_problem_polytope(
+    problem: ContactProblem, n_faces: int = DEFAULT_N_FACES, prune: bool = True
+) -> FeasibleWrenchPolytope:
+    """:func:`feasible_wrench_polytope` of a state's contacts.
+
+    ``problem`` comes from :func:`~margin_rl.stability.analytic.contact_problem`.
+    """
+    return feasible_wrench_polytope(
+        problem.contact_points,
+        problem.normals,
+        problem.stance,
+        problem.mu,
+        problem.jacobians,
+        problem.torque_limits,
+        problem.leg_bias,
+        n_faces=n_faces,
+        prune=prune,
+    )
+
+
 def fwp_feasibility(
     robot: Robot, lam: ArrayLike, n_faces: int = DEFAULT_N_FACES, prune: bool = False
 ) -> FWPFeasibility:
@@ -1263,27 +1284,8 @@ def fwp_feasibility(
         timings = {"kinematics": t1 - t0, "total": time.perf_counter() - t0}
         return FWPFeasibility(math.nan, status, nan_wrench, (), None, (), timings, message)
 
-    fwp = feasible_wrench_polytope(
-        problem.contact_points,
-        problem.normals,
-        problem.stance,
-        problem.mu,
-        problem.jacobians,
-        problem.torque_limits,
-        problem.leg_bias,
-        n_faces=n_faces,
-        prune=prune,
-    )
-    wrench = _frozen(
-        gravito_inertial_wrench(
-            problem.mass,
-            problem.com_acc,
-            problem.ang_momentum_rate,
-            problem.ext_force,
-            problem.ext_torque,
-            problem.gravity,
-        )
-    )
+    fwp = contact_problem_polytope(problem, n_faces=n_faces, prune=prune)
+    wrench = _frozen(problem.gravito_inertial_wrench())
     t2 = time.perf_counter()
     if prune and fwp.n_vertices > 0:
         res = feasibility_factor(fwp.vertices, wrench, center=fwp.center, length_scale=fwp.length_scale)

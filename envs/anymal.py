@@ -88,9 +88,7 @@ class AnymalEnv(gymnasium.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
-        if seed is not None:
-            self.core.rng = np.random.default_rng(seed)
-        self.core.reset()
+        self.core.reset(seed=seed)
         return self.core.observe_all()[0], {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:

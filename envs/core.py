@@ -250,8 +250,14 @@ class AnymalCore:
         return analytic
 
     # ------------------------------------------------------------------ reset
-    def reset(self, ids: np.ndarray | None = None) -> None:
-        """Reset environments ``ids`` (all if None) to a randomised standing state and new commands."""
+    def reset(self, ids: np.ndarray | None = None, seed: int | None = None) -> None:
+        """Reset environments ``ids`` (all if None) to a randomised standing state and new commands.
+
+        ``seed`` (optional) first reseeds the generator behind every random draw of the core (resets,
+        commands, noise, pushes), so the same seed gives the same rollout.
+        """
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
         ids = np.arange(self.num_envs) if ids is None else np.asarray(ids, dtype=np.int64)
         if ids.size == 0:
             return

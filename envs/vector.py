@@ -56,9 +56,7 @@ class AnymalVectorEnv(VectorEnv):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         super().reset(seed=seed)
-        if seed is not None:
-            self.core.rng = np.random.default_rng(seed)
-        self.core.reset()
+        self.core.reset(seed=seed)
         return self.core.observe_all(), {}
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:

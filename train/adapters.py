@@ -121,11 +121,9 @@ class Sb3VecEnv(_Sb3VecEnvBase):
     def reset(self) -> np.ndarray:
         """Reset every environment; a seed set with :meth:`seed` reseeds the core's generator first."""
         seed = self._seeds[0]
-        if seed is not None:
-            self.core.rng = np.random.default_rng(seed)
         self._reset_seeds()
         self._reset_options()
-        self.core.reset()
+        self.core.reset(seed=seed)
         self.stats.reset()
         self.reset_infos = [{} for _ in range(self.num_envs)]
         return self.core.observe_all()

@@ -547,15 +547,7 @@ def iterative_projection(
             status = "max_lps"
             break
         k = caps.index(max(caps))
-        k2 = (k + 1) % len(angles)
-        t1 = angles[k]
-        t2 = angles[k2] if k2 > k else angles[k2] + 2.0 * math.pi
-        # Outward normal of the inner edge p_k -> p_k2 (CCW, so outward is on the right).
-        t_new = math.atan2(xs[k] - xs[k2], ys[k2] - ys[k])
-        t_new = t1 + (t_new - t1) % (2.0 * math.pi)
-        if not (t1 < t_new < t2) or t2 - t1 >= math.pi:
-            # Noise pushed the normal outside the wedge, or the cap is open: bisect the wedge.
-            t_new = 0.5 * (t1 + t2)
+        t_new = _next_direction(angles, xs, ys, k)
         n_evals += 1
         code, x, y = support(math.cos(t_new), math.sin(t_new))
         if code != SUPPORT_OK:
@@ -578,8 +570,12 @@ def iterative_projection(
     return ProjectionResult(pts, np.asarray(angles), float(sum(caps) + frozen_gap), n_evals, status)
 
 
-def _next_direction(angles: list[float], xs: list[float], ys: list[float], k: int) -> tuple[int, float]:
-    """Refining direction for cap k: the outward normal of its inner edge (bisector as fallback)."""
+def _next_direction(angles: list[float], xs: list[float], ys: list[float], k: int) -> float:
+    """Refining direction [rad] for cap k: the outward normal of its inner edge p_k -> p_k+1.
+
+    Points are CCW, so outward is on the right. If solver noise pushed that normal outside the
+    cap's wedge of support directions, or the cap is open (wedge >= pi), the wedge is bisected.
+    """
     k2 = (k + 1) % len(angles)
     t1 = angles[k]
     t2 = angles[k2] if k2 > k else angles[k2] + 2.0 * math.pi
@@ -587,7 +583,7 @@ def _next_direction(angles: list[float], xs: list[float], ys: list[float], k: in
     t_new = t1 + (t_new - t1) % (2.0 * math.pi)
     if not (t1 < t_new < t2) or t2 - t1 >= math.pi:
         t_new = 0.5 * (t1 + t2)
-    return k2, t_new
+    return t_new
 
 
 def _focused_projection(
@@ -648,7 +644,7 @@ def _focused_projection(
         if not candidates:
             break
         k = min(candidates, key=lambda k: min(lo_hi[k]))
-        _, t_new = _next_direction(angles, xs, ys, k)
+        t_new = _next_direction(angles, xs, ys, k)
         n_evals += 1
         code, x, y = support(math.cos(t_new), math.sin(t_new))
         if code != SUPPORT_OK:

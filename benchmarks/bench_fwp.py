@@ -48,8 +48,7 @@ from margin_rl.stability.fwp import (  # noqa: E402
     fwp_feasibility,
     minkowski_feasibility_factor,
 )
-from margin_rl.stability.lambda_state import StabilityState  # noqa: E402
-from margin_rl.stability.sampling import nominal_feet  # noqa: E402
+from margin_rl.stability.sampling import nominal_feet, standing_state  # noqa: E402
 
 PAPER = {  # Table I (LP) and Table II (Politopix V-description), HyQ
     3: {"vertices": 436, "variables": 437, "v_descr_ms": 150.0, "lp_ms": 90.0},
@@ -75,18 +74,7 @@ def make_states(robot: Robot, n_contacts: int, n_states: int, seed: int) -> list
         heights = HEIGHTS + (rng.uniform(-0.03, 0.03, 4) if k else 0.0)
         tilts = TILTS + (rng.uniform(-0.1, 0.1, (4, 2)) if k else 0.0)
         feet = nominal_feet(robot) + np.column_stack([np.zeros((4, 2)), heights])
-        lam = StabilityState(
-            gravity_axis=np.array([0.0, 0.0, 1.0]),
-            com_vel=np.zeros(3),
-            com_acc=np.zeros(3),
-            base_ang_acc=np.zeros(3),
-            ext_force=np.zeros(3),
-            ext_torque=np.zeros(3),
-            feet=feet,
-            mu=np.array(0.7),
-            contacts=contacts,
-            normals=np.array([normal(*t) for t in tilts]),
-        ).to_lambda()
+        lam = standing_state(robot, feet=feet, mu=0.7, contacts=contacts, normals=np.array([normal(*t) for t in tilts]))
         if isinstance(contact_problem(robot, lam), ContactProblem):
             lams.append(lam)
     return lams

@@ -20,31 +20,15 @@ import numpy as np
 
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic import STATUSES, analytic_margin_batch
-from margin_rl.stability.lambda_state import StabilityState
 from margin_rl.stability.learned import LearnedMargin
-from margin_rl.stability.sampling import nominal_feet, sample_states
+from margin_rl.stability.sampling import nominal_feet, sample_states, standing_state
 
 
 def offset_grid_states(robot_name: str, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     """lambda of the static standing robot with its base (CoM) moved by (x, y): feet shift by -(x, y)."""
     robot = load_robot(robot_name)
     feet = nominal_feet(robot)
-    X, Y = np.meshgrid(xs, ys)
-    shift = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
-    n = len(shift)
-    state = StabilityState(
-        gravity_axis=np.tile([0.0, 0.0, 1.0], (n, 1)),
-        com_vel=np.zeros((n, 3)),
-        com_acc=np.zeros((n, 3)),
-        base_ang_acc=np.zeros((n, 3)),
-        ext_force=np.zeros((n, 3)),
-        ext_torque=np.zeros((n, 3)),
-        feet=feet[None] - shift[:, None, :],
-        mu=np.full(n, 0.7),
-        contacts=np.ones((n, 4)),
-        normals=np.tile([0.0, 0.0, 1.0], (n, 4, 1)),
-    )
-    return state.to_lambda()
+    return np.array([standing_state(robot, feet=feet - [x, y, 0.0], mu=0.7) for y in ys for x in xs])
 
 
 def margin_map(robot_name: str, out: Path, workers: int | None = None) -> Path:

@@ -32,7 +32,7 @@ margin. ``reachable_only=False`` returns raw Table I draws.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -84,6 +84,35 @@ def nominal_feet(robot: Robot) -> np.ndarray:
     """(4, 3) foot-sphere centres relative to the CoM at the standing pose with a level base [m]."""
     q = robot.standing_joint_pos
     return robot.foot_positions(q) - robot.com_position(q)
+
+
+def standing_state(robot: Robot, **overrides: np.ndarray) -> np.ndarray:
+    """lambda (47,) of ``robot`` standing still at its nominal stance on flat ground.
+
+    Level base, zero CoM velocity and accelerations, no external wrench, the four feet of
+    :func:`nominal_feet` in contact, flat normals and mu = 0.8; keyword arguments replace any
+    :class:`~margin_rl.stability.lambda_state.StabilityState` field (e.g. ``com_vel=...``).
+
+    Raises:
+        TypeError: an override that is not a lambda field.
+    """
+    unknown = set(overrides) - {f.name for f in fields(StabilityState)}
+    if unknown:
+        raise TypeError(f"unknown lambda fields {sorted(unknown)}")
+    values = dict(
+        gravity_axis=np.array([0.0, 0.0, 1.0]),
+        com_vel=np.zeros(3),
+        com_acc=np.zeros(3),
+        base_ang_acc=np.zeros(3),
+        ext_force=np.zeros(3),
+        ext_torque=np.zeros(3),
+        feet=nominal_feet(robot),
+        mu=np.array(0.8),
+        contacts=np.ones(N_FEET),
+        normals=np.tile([0.0, 0.0, 1.0], (N_FEET, 1)),
+    )
+    values.update({k: np.asarray(v, dtype=float) for k, v in overrides.items()})
+    return StabilityState(**values).to_lambda()
 
 
 def reachable(robot: Robot, lam: np.ndarray, com_iterations: int = 10) -> np.ndarray:

@@ -8,30 +8,13 @@ import pytest
 from margin_rl import load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin, analytic_margin_batch
 from margin_rl.stability.icp import stability_margin
-from margin_rl.stability.lambda_state import LAMBDA_SLICES, StabilityState, from_lambda
-from margin_rl.stability.sampling import nominal_feet, sample_states
+from margin_rl.stability.lambda_state import LAMBDA_SLICES, from_lambda
+from margin_rl.stability.sampling import nominal_feet, sample_states, standing_state
 
 
 @pytest.fixture(scope="module", params=["anymal_b", "anymal_c"])
 def robot(request):
     return load_robot(request.param)
-
-
-def static_state(robot, **overrides) -> np.ndarray:
-    values = dict(
-        gravity_axis=np.array([0.0, 0.0, 1.0]),
-        com_vel=np.zeros(3),
-        com_acc=np.zeros(3),
-        base_ang_acc=np.zeros(3),
-        ext_force=np.zeros(3),
-        ext_torque=np.zeros(3),
-        feet=nominal_feet(robot),
-        mu=np.array(0.8),
-        contacts=np.ones(4),
-        normals=np.tile([0.0, 0.0, 1.0], (4, 1)),
-    )
-    values.update(overrides)
-    return StabilityState(**values).to_lambda()
 
 
 def contact_polygon_distance(points_xy: np.ndarray, p: np.ndarray) -> float:
@@ -44,7 +27,7 @@ def contact_polygon_distance(points_xy: np.ndarray, p: np.ndarray) -> float:
 
 
 def test_standing_robot_is_stable_and_region_inside_support_polygon(robot) -> None:
-    result = analytic_margin(robot, static_state(robot), AnalyticSettings(focus_tol=None))
+    result = analytic_margin(robot, standing_state(robot), AnalyticSettings(focus_tol=None))
     assert result.status == "ok", result.message
     assert result.margin > 0.1
     contact_xy = (nominal_feet(robot) - [0, 0, robot.foot_radius])[:, :2]
@@ -58,11 +41,11 @@ def test_standing_robot_is_stable_and_region_inside_support_polygon(robot) -> No
 
 def test_capture_point_and_margin_follow_eq5_and_eq7(robot) -> None:
     v = np.array([0.6, -0.2, 0.0])
-    result = analytic_margin(robot, static_state(robot, com_vel=v))
+    result = analytic_margin(robot, standing_state(robot, com_vel=v))
     omega = np.sqrt(robot.gravity / result.com_height)
     np.testing.assert_allclose(result.capture_point, v[:2] / omega, atol=1e-12)
     assert result.margin == pytest.approx(stability_margin(result.region, result.capture_point))
-    still = analytic_margin(robot, static_state(robot))
+    still = analytic_margin(robot, standing_state(robot))
     assert result.margin < still.margin
     # CoM height: above the stance contact points (sphere centre minus radius along the normal).
     expected = -np.mean(nominal_feet(robot)[:, 2] - robot.foot_radius)
@@ -74,8 +57,8 @@ def test_forward_acceleration_moves_the_region_forward(robot) -> None:
     support polygon, so the region's front and back edges both shift forward by h a / g."""
     a = 1.5
     full = AnalyticSettings(focus_tol=None)  # the whole region, refined uniformly
-    still = analytic_margin(robot, static_state(robot), full)
-    accel = analytic_margin(robot, static_state(robot, com_acc=np.array([a, 0.0, 0.0])), full)
+    still = analytic_margin(robot, standing_state(robot), full)
+    accel = analytic_margin(robot, standing_state(robot, com_acc=np.array([a, 0.0, 0.0])), full)
     expected = still.com_height * a / robot.gravity
     for extreme in (np.min, np.max):
         shift = extreme(accel.region.vertices[:, 0]) - extreme(still.region.vertices[:, 0])
@@ -84,7 +67,7 @@ def test_forward_acceleration_moves_the_region_forward(robot) -> None:
 
 def test_trot_stance_has_no_positive_margin(robot) -> None:
     result = analytic_margin(
-        robot, static_state(robot, contacts=np.array([1.0, 0.0, 0.0, 1.0])), AnalyticSettings(focus_tol=None)
+        robot, standing_state(robot, contacts=np.array([1.0, 0.0, 0.0, 1.0])), AnalyticSettings(focus_tol=None)
     )
     assert result.status == "ok", result.message
     assert result.margin <= 5e-3
@@ -97,16 +80,16 @@ def test_trot_stance_has_no_positive_margin(robot) -> None:
 def test_statuses(robot) -> None:
     far = nominal_feet(robot).copy()
     far[0] += [0.5, 0.0, -0.3]
-    assert analytic_margin(robot, static_state(robot, feet=far)).status == "unreachable"
-    none = analytic_margin(robot, static_state(robot, contacts=np.zeros(4)))
+    assert analytic_margin(robot, standing_state(robot, feet=far)).status == "unreachable"
+    none = analytic_margin(robot, standing_state(robot, contacts=np.zeros(4)))
     assert none.status == "no_contact" and np.isnan(none.margin)
     # Pushing down with 20 body weights exceeds every torque limit: no equilibrium anywhere.
-    crush = analytic_margin(robot, static_state(robot, ext_force=np.array([0.0, 0.0, -20 * 9.81 * robot.total_mass])))
+    crush = analytic_margin(robot, standing_state(robot, ext_force=np.array([0.0, 0.0, -20 * 9.81 * robot.total_mass])))
     assert crush.status == "infeasible" and np.isnan(crush.margin)
 
 
 def test_bad_lambda(robot) -> None:
-    lam = static_state(robot)
+    lam = standing_state(robot)
     bad = lam.copy()
     bad[LAMBDA_SLICES["mu"]] = np.nan
     with pytest.raises(ValueError, match="mu"):
@@ -139,7 +122,7 @@ def test_batch_over_processes_matches_sequential() -> None:
 
 def test_settings_change_the_friction_model() -> None:
     robot = load_robot("anymal_c")
-    lam = static_state(robot, mu=np.array(0.3), com_acc=np.array([2.0, 1.0, 0.0]))
+    lam = standing_state(robot, mu=np.array(0.3), com_acc=np.array([2.0, 1.0, 0.0]))
     cone = analytic_margin(robot, lam, AnalyticSettings(friction="cone"))
     pyramid = analytic_margin(robot, lam, AnalyticSettings(friction=("pyramid", 4)))
     assert cone.status == pyramid.status == "ok"

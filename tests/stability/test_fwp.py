@@ -30,8 +30,7 @@ from margin_rl.stability.fwp import (
     wrench_violations,
 )
 from margin_rl.stability.region import feasible_region
-from margin_rl.stability.sampling import nominal_feet
-from tests.stability.test_analytic import static_state
+from margin_rl.stability.sampling import nominal_feet, standing_state
 
 THREE = np.array([True, True, True, False])  # LF, RF, LH: RH lifted
 # The feasible region with the FWP's friction model: the same inscribed 4-face pyramid, no contact torques.
@@ -45,7 +44,7 @@ def robot():
 
 @pytest.fixture(scope="module")
 def problem(robot):
-    return contact_problem(robot, static_state(robot))
+    return contact_problem(robot, standing_state(robot))
 
 
 def polytope(problem, stance=THREE, **over) -> FeasibleWrenchPolytope:
@@ -303,7 +302,7 @@ def test_static_robot_factor_falls_through_zero_where_the_region_ends(robot) -> 
     ts = np.linspace(0.14, -0.10, 9)  # CoM displacement along u [m]: feet relative to the CoM move by -t u
     s, margin = [], []
     for t in ts:
-        lam = static_state(robot, feet=feet - t * u, contacts=THREE.astype(float))
+        lam = standing_state(robot, feet=feet - t * u, contacts=THREE.astype(float))
         r = fwp_feasibility(robot, lam)
         assert r.status == "ok"
         s.append(r.s)
@@ -329,7 +328,7 @@ def test_com_inside_feasible_region_iff_factor_non_negative(name) -> None:
     for contacts in (np.ones(4), THREE.astype(float)):
         for angle, dist in itertools.product((0.3, 1.9, 3.4, 5.0), (0.0, 0.05, 0.1)):
             d = dist * np.array([math.cos(angle), math.sin(angle), 0.0])
-            lam = static_state(robot, feet=feet - d, contacts=contacts)
+            lam = standing_state(robot, feet=feet - d, contacts=contacts)
             m = analytic_margin(robot, lam, PYRAMID)
             r = fwp_feasibility(robot, lam)
             assert r.status == m.status == "ok"
@@ -373,11 +372,11 @@ def test_com_inside_torque_limited_region_iff_factor_non_negative(problem) -> No
 
 def test_violations_name_the_limit(robot) -> None:
     mg = robot.total_mass * robot.gravity
-    pushed = fwp_feasibility(robot, static_state(robot, ext_force=np.array([0.0, 0.7 * mg, 0.0])))
+    pushed = fwp_feasibility(robot, standing_state(robot, ext_force=np.array([0.0, 0.7 * mg, 0.0])))
     assert pushed.s < 0 and pushed.violated == ("contact",)  # sideways: the feet would slip
-    loaded = fwp_feasibility(robot, static_state(robot, ext_force=np.array([0.0, 0.0, -4000.0])))
+    loaded = fwp_feasibility(robot, standing_state(robot, ext_force=np.array([0.0, 0.0, -4000.0])))
     assert loaded.s < 0 and loaded.violated == ("actuation",)  # pressed down: the knees give in
-    calm = fwp_feasibility(robot, static_state(robot))
+    calm = fwp_feasibility(robot, standing_state(robot))
     assert calm.s > 0 and calm.violated == ()
 
 
@@ -402,7 +401,7 @@ def test_coupled_violation_inside_cwc_and_awp() -> None:
 
 
 def test_pruned_pipeline_gives_the_same_factor(robot) -> None:
-    lam = static_state(robot)
+    lam = standing_state(robot)
     fast, paper = fwp_feasibility(robot, lam), fwp_feasibility(robot, lam, prune=True)
     assert fast.n_vertices is None and paper.n_vertices is not None and paper.n_vertices > 1000
     assert paper.s == pytest.approx(fast.s, abs=1e-6)
@@ -414,8 +413,8 @@ def test_pruned_pipeline_gives_the_same_factor(robot) -> None:
 
 def test_same_statuses_as_the_analytic_margin(robot) -> None:
     cases = {
-        "no_contact": static_state(robot, contacts=np.zeros(4)),
-        "unreachable": static_state(robot, feet=nominal_feet(robot) + np.array([1.0, 0.0, 0.0])),
+        "no_contact": standing_state(robot, contacts=np.zeros(4)),
+        "unreachable": standing_state(robot, feet=nominal_feet(robot) + np.array([1.0, 0.0, 0.0])),
     }
     for status, lam in cases.items():
         r = fwp_feasibility(robot, lam)

@@ -547,9 +547,8 @@ def iterative_projection(
             status = "max_lps"
             break
         k = caps.index(max(caps))
-        t_new = _next_direction(angles, xs, ys, k)
-        n_evals += 1
-        code, x, y = support(math.cos(t_new), math.sin(t_new))
+        code, x, y, t_new, evals = _refine_cap(support, angles, xs, ys, k)
+        n_evals += evals
         if code != SUPPORT_OK:
             # (Infeasible cannot happen for a non-empty set: a numerical failure as well.)
             failed = True
@@ -584,6 +583,34 @@ def _next_direction(angles: list[float], xs: list[float], ys: list[float], k: in
     if not (t1 < t_new < t2) or t2 - t1 >= math.pi:
         t_new = 0.5 * (t1 + t2)
     return t_new
+
+
+def _refine_cap(
+    support: Callable[[float, float], tuple[int, float, float]],
+    angles: list[float],
+    xs: list[float],
+    ys: list[float],
+    k: int,
+) -> tuple[int, float, float, float, int]:
+    """Support point for refining cap k: ``(code, x, y, direction used, programs solved)``.
+
+    The edge's outward normal first; if its program fails (e.g. Clarabel stops at AlmostSolved,
+    which is not accepted), once more along the bisector of the cap's wedge. Any direction strictly
+    inside the wedge yields a valid support point of the same cap, so the cap is only given up
+    (frozen) when both fail.
+    """
+    t_new = _next_direction(angles, xs, ys, k)
+    code, x, y = support(math.cos(t_new), math.sin(t_new))
+    if code != SUPPORT_FAILED:
+        return code, x, y, t_new, 1
+    k2 = (k + 1) % len(angles)
+    t1 = angles[k]
+    t2 = angles[k2] if k2 > k else angles[k2] + 2.0 * math.pi
+    t_mid = 0.5 * (t1 + t2)
+    if abs(t_mid - t_new) < 1e-9:
+        return code, x, y, t_new, 1
+    code, x, y = support(math.cos(t_mid), math.sin(t_mid))
+    return code, x, y, t_mid, 2
 
 
 def _focused_projection(
@@ -644,9 +671,8 @@ def _focused_projection(
         if not candidates:
             break
         k = min(candidates, key=lambda k: min(lo_hi[k]))
-        t_new = _next_direction(angles, xs, ys, k)
-        n_evals += 1
-        code, x, y = support(math.cos(t_new), math.sin(t_new))
+        code, x, y, t_new, evals = _refine_cap(support, angles, xs, ys, k)
+        n_evals += evals
         if code != SUPPORT_OK:
             failed = True
             frozen[k] = True
@@ -1238,8 +1264,10 @@ def feasible_region(
     notes = []
     if proj.status == "max_lps":
         notes.append(f"max_lps={max_lps} reached with gap {proj.gap:.3g} m^2 > tol {tol_v:.3g} m^2")
-    if proj.status == "inaccurate" or oracle.n_failed:
-        notes.append(f"{oracle.n_failed} direction(s) failed to solve and were skipped")
+    if proj.status == "inaccurate":
+        notes.append(f"{oracle.n_failed} direction(s) failed to solve; caps where the bisector failed too were skipped")
+    elif oracle.n_failed:
+        notes.append(f"{oracle.n_failed} direction(s) failed to solve and were replaced by their cap's bisector")
     status = "ok"
     if np.any(np.abs(verts) >= extent_v - _BOX_TOL):
         status = "unbounded"

@@ -26,13 +26,13 @@ import json
 import os
 import shlex
 import sys
-import tempfile
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from margin_rl.atomic import atomic_savez, atomic_write_text
 from margin_rl.robot import available_robots, load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
 from margin_rl.stability.lambda_state import LAMBDA_DIM
@@ -89,29 +89,13 @@ def shard_path(out: Path, index: int) -> Path:
     return out / f"shard_{index:05d}.npz"
 
 
-def _atomic_savez(path: Path, **arrays: np.ndarray) -> None:
-    """Write an npz next to ``path`` and rename it into place (atomic on POSIX)."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; datasets are meant to be shared
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
     """Sample, label and write shard ``index``; returns its status counts. Runs in a worker."""
     robot = load_robot(spec.robot)
     seed = np.random.SeedSequence(spec.seed, spawn_key=(index,))
     lams = sample_states(robot, spec.shard_length(index), seed=seed)
     labels = analytic_margin_batch(spec.robot, lams, spec.settings, workers=1)
-    _atomic_savez(
+    atomic_savez(
         shard_path(out, index),
         lam=lams.astype(np.float32),
         margin=labels.margin.astype(np.float32),
@@ -165,16 +149,8 @@ def _prepare(spec: DatasetSpec, out: Path, command: str) -> list[int]:
         },
         "command": command,
     }
-    _atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")
+    atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")
     return [i for i in range(spec.n_shards) if not _shard_is_complete(shard_path(out, i), spec.shard_length(i))]
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
 
 
 def _local_tasks(spec: DatasetSpec, todo: Sequence[int], out: Path, workers: int) -> Iterator[tuple[int, dict]]:

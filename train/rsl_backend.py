@@ -26,12 +26,12 @@ os.environ.setdefault("GIT_PYTHON_REFRESH", "quiet")
 import torch
 from rsl_rl.runners import OnPolicyRunner
 
+from margin_rl.atomic import atomic_write
 from margin_rl.train.adapters import RslVecEnv
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
     TORCHSCRIPT_FILE,
     RunHooks,
-    atomic_write,
     checkpoint_path,
     quiet_stdout,
     torchscript_export,

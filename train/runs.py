@@ -20,13 +20,14 @@ import os
 import re
 import signal
 import sys
-import tempfile
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
-from typing import Any, BinaryIO
+from typing import Any
+
+from margin_rl.atomic import atomic_write
 
 CONFIG_FILE = "config.json"
 PROGRESS_FILE = "progress.json"
@@ -46,24 +47,6 @@ def run_name(env_id: str, backend: str, margin_weight: float, seed: int, when: f
 def final_model_name(backend: str) -> str:
     """File name of the final model in a run directory: ``final_model.pt`` (rsl) or ``final_model.zip`` (sb3)."""
     return "final_model.zip" if backend == "sb3" else "final_model.pt"
-
-
-def atomic_write(path: str | Path, write: Callable[[BinaryIO], None]) -> Path:
-    """Write ``path`` through ``write(file)`` into a temporary file of the same folder, then ``os.replace``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-    return path
 
 
 def write_json(path: str | Path, data: Any) -> Path:

@@ -25,6 +25,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 
+from margin_rl.atomic import atomic_write
 from margin_rl.train.adapters import Sb3VecEnv
 from margin_rl.train.config import Sb3PPOConfig
 from margin_rl.train.metrics import step_tags, tensorboard_tags
@@ -32,7 +33,6 @@ from margin_rl.train.runs import (
     TENSORBOARD_DIR,
     TORCHSCRIPT_FILE,
     RunHooks,
-    atomic_write,
     checkpoint_path,
     torchscript_export,
 )

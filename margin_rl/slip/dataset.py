@@ -29,9 +29,7 @@ import argparse
 import dataclasses
 import hashlib
 import json
-import os
 import sys
-import tempfile
 import time
 import zipfile
 from collections.abc import Sequence
@@ -43,6 +41,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from margin_rl.atomic import atomic_savez, atomic_write_bytes
 from margin_rl.slip.dynamics import SlipParams, Status
 from margin_rl.slip.margin import FailureMargin, label_samples, sample_box
 
@@ -50,8 +49,6 @@ __all__ = [
     "DatasetConfig",
     "GenerationSummary",
     "SlipDataset",
-    "atomic_savez",
-    "atomic_write_bytes",
     "compute_margins",
     "generate_dataset",
     "load_dataset",
@@ -134,46 +131,6 @@ class SlipDataset:
 
 
 # ---------------------------------------------------------------------------- atomic files
-
-
-def _mkstemp_beside(path: Path) -> tuple[int, str]:
-    """Temporary file next to ``path`` (same file system, so ``os.replace`` is atomic).
-
-    ``mkstemp`` creates it 0600; data files are meant to be shared, so make it 0644.
-    """
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.fchmod(fd, 0o644)
-    return fd, tmp
-
-
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via a temporary file in the same directory and ``os.replace``."""
-    path = Path(path)
-    fd, tmp = _mkstemp_beside(path)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def atomic_savez(path: Path, **arrays: NDArray[Any]) -> None:
-    """:func:`numpy.savez` (no pickled objects) written atomically to ``path``."""
-    path = Path(path)
-    fd, tmp = _mkstemp_beside(path)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, **arrays)  # a file object keeps numpy from appending ".npz"
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 # ---------------------------------------------------------------------------- shards

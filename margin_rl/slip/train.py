@@ -34,7 +34,8 @@ import torch
 from numpy.typing import NDArray
 from torch import nn
 
-from margin_rl.slip.dataset import SlipDataset, atomic_savez, atomic_write_bytes, load_dataset
+from margin_rl.atomic import atomic_savez, atomic_write_bytes
+from margin_rl.slip.dataset import SlipDataset, load_dataset
 from margin_rl.slip.margin import PREDICTION_WEIGHTS
 from margin_rl.slip.models import BUNDLE_DIR, MLP, box_normalisation, sha256_file
 

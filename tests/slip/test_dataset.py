@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from margin_rl.slip.dataset import DatasetConfig, atomic_savez, generate_dataset, load_dataset, main
+from margin_rl.atomic import atomic_savez
+from margin_rl.slip.dataset import DatasetConfig, generate_dataset, load_dataset, main
 from margin_rl.slip.dynamics import SlipParams
 from margin_rl.slip.margin import FailureMargin
 

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from margin_rl.atomic import atomic_savez, atomic_write_text
 from margin_rl.stability.lambda_state import LAMBDA_DIM, LAMBDA_FIELDS, check_lambda, lambda_names
 
 ARCHITECTURE: tuple[int, ...] = (LAMBDA_DIM, 256, 128, 128, 1)
@@ -132,7 +133,7 @@ def save_weights(weights: MarginWeights, path: str | Path, card: dict[str, objec
     path = Path(path).with_suffix("")
     weights.validate(str(path))
     npz = path.with_suffix(".npz")
-    np.savez(npz, **weights.to_arrays())
+    atomic_savez(npz, **weights.to_arrays())
     full_card = {
         "format": WEIGHTS_FORMAT,
         "architecture": list(ARCHITECTURE),
@@ -143,7 +144,7 @@ def save_weights(weights: MarginWeights, path: str | Path, card: dict[str, objec
         "file": npz.name,
         "sha256": _sha256(npz),
     }
-    path.with_suffix(".json").write_text(json.dumps(full_card, indent=2) + "\n")
+    atomic_write_text(path.with_suffix(".json"), json.dumps(full_card, indent=2) + "\n")
     return full_card
 
 

@@ -45,7 +45,7 @@ from margin_rl.envs.observations import (
 from margin_rl.envs.rewards import compute_rewards
 from margin_rl.envs.terrain import Terrain, flat_terrain, rough_terrain
 from margin_rl.robot import Robot, load_robot, quat_wxyz_to_matrix
-from margin_rl.stability.lambda_state import LAMBDA_DIM, StabilityState
+from margin_rl.stability.lambda_state import LAMBDA_DIM, StabilityState, from_lambda
 
 MARGIN_CLIP: tuple[float, float] = (-0.5, 0.5)
 """Range [m] the margin term is clipped to (the learned model extrapolates outside its data)."""
@@ -427,8 +427,7 @@ class AnymalCore:
             | diverged
         )
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
-        R_wh = heading_rotation(R)
-        feet_h = np.einsum("nji,nkj->nki", R_wh, s["feet"] - s["com"][:, None, :])
+        feet_h = from_lambda(lam).feet  # feet relative to the CoM in the heading frame, as built above
         info = {
             **{f"reward_{k}": v for k, v in terms.items()},
             "margin": margin,

@@ -161,10 +161,25 @@ def leg_forward_kinematics(geometry: LegGeometry, joint_pos: np.ndarray) -> np.n
     Returns:
         (..., 3) foot-sphere centre in the base frame [m].
     """
+    o_shank, r_shank = leg_frames(geometry, joint_pos)[-1]
+    return o_shank + np.einsum("...ij,j->...i", r_shank, geometry.foot_offset)
+
+
+def leg_frames(geometry: LegGeometry, joint_pos: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Origins (..., 3) [m] and orientations (..., 3, 3) of the HIP, THIGH and SHANK bodies, base frame.
+
+    The leg chain of :class:`LegGeometry`: R_hip = Rx(q_HAA), R_thigh = R_hip Ry(q_HFE),
+    R_shank = R_thigh Ry(q_KFE); o_hip = haa_origin, o_thigh = o_hip + R_hip hfe_offset,
+    o_shank = o_thigh + R_thigh kfe_offset.
+    """
     q = np.asarray(joint_pos, dtype=float)
-    shank = np.einsum("...ij,j->...i", _rot_y(q[..., 2]), geometry.foot_offset)
-    thigh = np.einsum("...ij,...j->...i", _rot_y(q[..., 1]), geometry.kfe_offset + shank)
-    return geometry.haa_origin + np.einsum("...ij,...j->...i", _rot_x(q[..., 0]), geometry.hfe_offset + thigh)
+    r_hip = _rot_x(q[..., 0])
+    r_thigh = r_hip @ _rot_y(q[..., 1])
+    r_shank = r_thigh @ _rot_y(q[..., 2])
+    o_hip = np.broadcast_to(geometry.haa_origin, (*q.shape[:-1], 3))
+    o_thigh = o_hip + np.einsum("...ij,j->...i", r_hip, geometry.hfe_offset)
+    o_shank = o_thigh + np.einsum("...ij,j->...i", r_thigh, geometry.kfe_offset)
+    return [(o_hip, r_hip), (o_thigh, r_thigh), (o_shank, r_shank)]
 
 
 def _wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -322,7 +337,7 @@ class Robot:
         """Whole-body CoM in the base frame, closed form and batched (for sampling millions of states).
 
         com = (m_base c_base + sum_b m_b (o_b + R_b c_b)) / M over the HIP, THIGH and SHANK bodies, with
-        the body origins o_b and orientations R_b of the leg chain (see :class:`LegGeometry`) and the
+        the body origins o_b and orientations R_b of the leg chain (:func:`leg_frames`) and the
         body masses m_b and inertial positions c_b of the MJCF. Matches Pinocchio's ``centerOfMass``.
 
         Args:
@@ -336,13 +351,8 @@ class Robot:
         base = model.body("base").id
         total = model.body_mass[base] * model.body_ipos[base] + np.zeros((*q.shape[:-1], 3))
         for i, g in enumerate(self.legs):
-            r_hip = _rot_x(q[..., 3 * i])
-            r_thigh = r_hip @ _rot_y(q[..., 3 * i + 1])
-            r_shank = r_thigh @ _rot_y(q[..., 3 * i + 2])
-            o_hip = g.haa_origin
-            o_thigh = o_hip + r_hip @ g.hfe_offset
-            o_shank = o_thigh + r_thigh @ g.kfe_offset
-            for suffix, o, R in (("HIP", o_hip, r_hip), ("THIGH", o_thigh, r_thigh), ("SHANK", o_shank, r_shank)):
+            frames = leg_frames(g, q[..., 3 * i : 3 * i + 3])
+            for suffix, (o, R) in zip(("HIP", "THIGH", "SHANK"), frames, strict=True):
                 b = model.body(f"{g.leg}_{suffix}").id
                 total = total + model.body_mass[b] * (o + R @ model.body_ipos[b])
         return total / self.total_mass

@@ -89,6 +89,18 @@ def test_foot_positions_agree_at_random_configurations(robot: margin_rl.Robot) -
             np.testing.assert_allclose(closed_form[i], mj_foot, atol=1e-10)
 
 
+def test_closed_form_com_agrees_with_pinocchio_and_mujoco(robot: margin_rl.Robot) -> None:
+    """The batched closed-form CoM (used to sample millions of states) against two independent sources."""
+    rng = np.random.default_rng(6)
+    q = random_joint_pos(robot, rng, 20)
+    batched = robot.com_positions(q)
+    assert batched.shape == (20, 3)
+    for qi, com in zip(q, batched, strict=True):
+        np.testing.assert_allclose(com, robot.com_position(qi), atol=1e-12)  # Pinocchio
+        data = mj_state(robot, np.zeros(3), np.array([1.0, 0, 0, 0]), qi)
+        np.testing.assert_allclose(com, data.subtree_com[robot.mj_model.body("base").id], atol=1e-12)  # MuJoCo
+
+
 def test_foot_jacobians_agree_with_mujoco_and_finite_differences(robot: margin_rl.Robot) -> None:
     rng = np.random.default_rng(2)
     for q in random_joint_pos(robot, rng, 10):

@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from margin_rl.atomic import atomic_savez, atomic_write_text
-from margin_rl.robot import available_robots, load_robot
-from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
+from margin_rl.robot import available_robots
+from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch, worker_robot
 from margin_rl.stability.lambda_state import LAMBDA_DIM
 from margin_rl.stability.sampling import SAMPLER_VERSION, sample_states
 
@@ -91,7 +91,7 @@ def shard_path(out: Path, index: int) -> Path:
 
 def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
     """Sample, label and write shard ``index``; returns its status counts. Runs in a worker."""
-    robot = load_robot(spec.robot)
+    robot = worker_robot(spec.robot)
     seed = np.random.SeedSequence(spec.seed, spawn_key=(index,))
     lams = sample_states(robot, spec.shard_length(index), seed=seed)
     labels = analytic_margin_batch(spec.robot, lams, spec.settings, workers=1)

@@ -326,11 +326,16 @@ class BatchMargins:
 _WORKER_ROBOT: dict[str, Robot] = {}
 
 
-def _evaluate_chunk(args: tuple[str, np.ndarray, AnalyticSettings]) -> tuple[np.ndarray, ...]:
-    name, lams, settings = args
+def worker_robot(name: str) -> Robot:
+    """This process's copy of robot ``name``, loaded once (batch and dataset workers reuse it)."""
     if name not in _WORKER_ROBOT:
         _WORKER_ROBOT[name] = load_robot(name)
-    robot = _WORKER_ROBOT[name]
+    return _WORKER_ROBOT[name]
+
+
+def _evaluate_chunk(args: tuple[str, np.ndarray, AnalyticSettings]) -> tuple[np.ndarray, ...]:
+    name, lams, settings = args
+    robot = worker_robot(name)
     n = len(lams)
     margin, status = np.full(n, np.nan), np.zeros(n, dtype=np.int8)
     n_lps, seconds = np.zeros(n, dtype=np.int16), np.zeros(n)

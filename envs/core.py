@@ -396,15 +396,8 @@ class AnymalCore:
         self._prev_contacts = s["contacts"].copy()
 
         R = s["base_rot"]
-        base_lin_vel = np.einsum("nji,nj->ni", R, s["lin_vel_world"])
-        projected_gravity = -R[:, 2, :]
         values = {
-            "base_lin_vel": base_lin_vel,
-            "base_ang_vel": s["ang_vel_body"],
-            "projected_gravity": projected_gravity,
-            "command": self.command,
-            "joint_pos": s["joint_pos"] - self._standing_joint_pos,
-            "joint_vel": s["joint_vel"],
+            **self._policy_values(s, slice(None)),
             "margin": margin,
             "torques": self._forces.copy(),
             "action": a,
@@ -433,8 +426,8 @@ class AnymalCore:
             "margin": margin,
             "base_lin_acc": np.einsum("nji,nj->ni", R, self._com_acc),  # CoM acceleration, base frame
             "base_ang_acc": np.einsum("nji,nj->ni", R, self._ang_acc),  # base frame
-            "base_lin_vel": base_lin_vel,
-            "velocity_error": np.abs(self.command[:, 0] - base_lin_vel[:, 0]),
+            "base_lin_vel": values["base_lin_vel"],
+            "velocity_error": np.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
             "contacts": s["contacts"].astype(np.float64),
             "stance_width": 0.5
             * (np.abs(feet_h[:, 0, 1] - feet_h[:, 1, 1]) + np.abs(feet_h[:, 2, 1] - feet_h[:, 3, 1])),
@@ -475,19 +468,21 @@ class AnymalCore:
         return assemble({**values, "last_action": self.last_action}, POLICY_OBSERVATIONS, noise, self.rng)
 
     def _observe_ids(self, ids: np.ndarray) -> np.ndarray:
-        s = self._read(ids)
+        values = {**self._policy_values(self._read(ids), ids), "last_action": self.last_action[ids]}
+        noise = self.config.randomization.observation_noise
+        return assemble(values, POLICY_OBSERVATIONS, noise, self.rng)
+
+    def _policy_values(self, s: dict[str, np.ndarray], ids: np.ndarray | slice) -> dict[str, np.ndarray]:
+        """The robot-state terms of the observation (and the rewards), from a state read of ``ids``."""
         R = s["base_rot"]
-        values = {
-            "base_lin_vel": np.einsum("nji,nj->ni", R, s["lin_vel_world"]),
+        return {
+            "base_lin_vel": np.einsum("nji,nj->ni", R, s["lin_vel_world"]),  # base frame
             "base_ang_vel": s["ang_vel_body"],
             "projected_gravity": -R[:, 2, :],
             "command": self.command[ids],
             "joint_pos": s["joint_pos"] - self._standing_joint_pos,
             "joint_vel": s["joint_vel"],
-            "last_action": self.last_action[ids],
         }
-        noise = self.config.randomization.observation_noise
-        return assemble(values, POLICY_OBSERVATIONS, noise, self.rng)
 
     def observe_all(self) -> np.ndarray:
         """Policy observations of every environment (after :meth:`reset`)."""

@@ -82,6 +82,9 @@ class EnvConfig:
     margin: str = "learned"
     margin_weight: float = 1.0  # weight of the margin term; 0 is the baseline of the comparison
     margin_weights: str | None = None  # learned-margin weights (.npz with its card); None: the robot's bundled
+    # reward per policy step while the episode runs, added to any preset (the comparison gives both variants
+    # the same bonus: the paper's L + m is negative per step for a trot, and PPO then learns to fall)
+    alive_bonus: float = 0.0
     logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
     acceleration_filter: float = 0.0  # EMA factor on the finite-difference accelerations (0: none)
     privileged_observations: bool = False  # add the critic group (terrain heights, friction, margin)
@@ -96,6 +99,8 @@ class EnvConfig:
             raise ValueError(f"reward_preset must be one of {sorted(REWARD_PRESETS)}, got {self.reward_preset!r}")
         if self.margin not in ("learned", "analytic", "fwp", "none"):
             raise ValueError(f"margin must be 'learned', 'analytic', 'fwp' or 'none', got {self.margin!r}")
+        if not 0.0 <= self.alive_bonus < float("inf"):
+            raise ValueError(f"alive_bonus must be finite and >= 0, got {self.alive_bonus}")
         if self.decimation < 1 or self.action_scale <= 0 or self.episode_length_s <= 0:
             raise ValueError("decimation, action_scale and episode_length_s must be positive")
         if not 0.0 <= self.acceleration_filter < 1.0:
@@ -111,4 +116,6 @@ class EnvConfig:
         weights["margin"] = weights.get("margin", 0.0) * self.margin_weight
         if self.margin == "none":
             weights["margin"] = 0.0
+        if self.alive_bonus:
+            weights["alive"] = weights.get("alive", 0.0) + self.alive_bonus
         return weights

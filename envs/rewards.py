@@ -30,6 +30,13 @@ def margin(s: Arrays, gain: float) -> np.ndarray:
     return s["margin"]
 
 
+def alive(s: Arrays, gain: float) -> np.ndarray:
+    """1 per policy step. A constant survival reward: with a margin term that is negative on most steps of a
+    dynamic gait, L + w m < 0 per step makes falling at once the best PPO can do; the bonus removes that
+    incentive and changes nothing else (see EnvConfig.alive_bonus)."""
+    return np.ones_like(s["margin"], dtype=float)
+
+
 def lateral_velocity(s: Arrays, gain: float) -> np.ndarray:
     return (s["base_lin_vel"][:, 1] - s["command"][:, 1]) ** 2
 
@@ -78,6 +85,7 @@ REWARD_TERMS: dict[str, Callable[[Arrays, float], np.ndarray]] = {
     for f in (
         velocity_tracking,
         margin,
+        alive,
         lateral_velocity,
         yaw_rate,
         vertical_velocity,

@@ -42,7 +42,7 @@ PROBE = textwrap.dedent(
 
 
 def _source_files() -> set[str]:
-    """Wheel paths that the source tree must produce (Python modules and MJCF assets)."""
+    """Wheel paths that the source tree must produce (modules, MJCF assets, bundled weights and policies)."""
     mapping = {
         "margin_rl": "margin_rl",
         "envs": "margin_rl/envs",
@@ -54,7 +54,8 @@ def _source_files() -> set[str]:
         for path in (ROOT / src).rglob("*"):
             if "__pycache__" in path.parts or not path.is_file():
                 continue
-            if path.suffix in {".py", ".xml"} or path.name == "py.typed" or "weights" in path.parts:
+            bundled = "weights" in path.parts or "bundled" in path.parts
+            if path.suffix in {".py", ".xml"} or path.name == "py.typed" or bundled:
                 expected.add(f"{dest}/{path.relative_to(ROOT / src).as_posix()}")
     return expected
 

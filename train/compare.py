@@ -15,6 +15,12 @@ measured for the baseline too. Outputs in ``<out>``:
 * ``compare.md`` and ``compare.json``: mean ± std over training seeds (each seed's value is its mean over the
   evaluation episodes) of velocity tracking error, base linear and angular acceleration RMS, stance width,
   margin and falls, with every run's numbers in the JSON.
+
+``--bundle DIR`` then copies the runs' TorchScript actors and configs into a policy bundle with a card
+(:mod:`margin_rl.train.bundle`); ``--bundled NAME`` trains nothing and evaluates a bundle the same way, e.g. the
+shipped ANYmal B policies (the README's main job)::
+
+    python -m margin_rl.train.compare --bundled anymal_b --out results/anymal_b
 """
 
 from __future__ import annotations
@@ -106,25 +112,50 @@ def run_compare(
     """Train and evaluate every (variant, seed); write compare.png/.md/.json into ``out``; returns the JSON."""
     out = Path(out)
     overrides = dict(env_options or {})
-    report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": overrides, "variants": {}}
-    examples: dict[str, Evaluation] = {}
+    variants: dict[str, tuple[float, list[tuple[int, Path]]]] = {}
     for name, weight in settings.variants().items():
-        runs = []
         for seed in settings.seeds:
             run_dir = out / "runs" / f"mw{weight:g}__s{seed}"
-            spec = _run_spec(settings, weight, seed, overrides)
-            final = _train_or_reuse(spec, run_dir, progress)
+            final = _train_or_reuse(_run_spec(settings, weight, seed, overrides), run_dir, progress)
+            variants.setdefault(name, (weight, []))[1].append((seed, final))
+    return evaluate_variants(variants, settings, out, overrides)
+
+
+def evaluate_variants(
+    variants: dict[str, tuple[float, list[tuple[int, Path]]]],
+    settings: CompareSettings,
+    out: str | Path,
+    env_options: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Evaluate every variant's policies on the same command and seeds; write compare.png/.md/.json into ``out``.
+
+    ``variants``: name -> (margin weight, [(training seed, policy file), ...]). A policy inside a run directory
+    is evaluated into ``<run>/eval``, any other (e.g. a bundled one) into ``<out>/eval/<variant>__s<seed>``.
+    """
+    from margin_rl.train.runs import find_run_config
+
+    out = Path(out)
+    report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": dict(env_options or {})}
+    report["variants"] = {}
+    examples: dict[str, Evaluation] = {}
+    for name, (weight, policies) in variants.items():
+        runs = []
+        for seed, policy in policies:
+            config = find_run_config(policy, levels=1)
+            in_run = config is not None and (config.parent / PROGRESS_FILE).is_file()
+            eval_dir = config.parent / "eval" if in_run else out / "eval" / f"{name.replace(' ', '_')}__s{seed}"
             metrics, evaluation = evaluate(
-                final,
+                policy,
                 episodes=settings.eval_episodes,
                 seed=settings.eval_seed,
                 forward_velocity=settings.forward_velocity,
                 warmup_s=settings.warmup_s,
-                out_dir=run_dir / "eval",
+                out_dir=eval_dir,
             )
             examples.setdefault(name, evaluation)
             summary = {k: v["mean"] for k, v in metrics["summary"].items()}
-            runs.append({"seed": seed, "run_dir": str(run_dir), "policy": str(final), "metrics": summary})
+            run_dir = str(config.parent) if in_run else None
+            runs.append({"seed": seed, "run_dir": run_dir, "policy": str(policy), "metrics": summary})
         table = {key: mean_std([r["metrics"][key] for r in runs]) for key in SUMMARY_METRICS}
         report["variants"][name] = {
             "margin_weight": weight,
@@ -213,40 +244,105 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--num-envs", type=int, default=d.num_envs)
     parser.add_argument("--total-steps", type=int, default=d.total_steps, help="environment steps per run")
     parser.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
-    parser.add_argument("--eval-episodes", type=int, default=d.eval_episodes)
-    parser.add_argument("--eval-seed", type=int, default=d.eval_seed)
-    parser.add_argument("--forward-velocity", type=float, default=d.forward_velocity, help="command [m/s]")
-    parser.add_argument("--warmup-s", type=float, default=d.warmup_s)
+    parser.add_argument("--eval-episodes", type=int, help=f"evaluation episodes per policy (default {d.eval_episodes})")
+    parser.add_argument("--eval-seed", type=int, help=f"seed of the evaluation episodes (default {d.eval_seed})")
+    parser.add_argument("--forward-velocity", type=float, help=f"command [m/s] (default {d.forward_velocity:g})")
+    parser.add_argument("--warmup-s", type=float, help=f"seconds left out of accelerations (default {d.warmup_s:g})")
     parser.add_argument("--device", default=d.device)
     parser.add_argument("--out", type=Path, help="output folder (default runs/compare__<env>__<backend>)")
+    parser.add_argument(
+        "--bundle", type=Path, metavar="DIR", help="after the comparison, write its policies and a card into DIR"
+    )
+    parser.add_argument(
+        "--bundled",
+        metavar="NAME",
+        help="train nothing: evaluate a policy bundle (shipped name, e.g. anymal_b, or a folder) with the "
+        "evaluation settings of its card unless given here",
+    )
     parser.add_argument("--no-progress", action="store_true")
     return parser
 
 
+_EVAL_OPTIONS = ("eval_episodes", "eval_seed", "forward_velocity", "warmup_s")
+
+
+def _eval_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    return {k: getattr(args, k) for k in _EVAL_OPTIONS if getattr(args, k) is not None}
+
+
+def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
+    return CompareSettings(
+        env_id=args.env or DEFAULT_ENV,
+        backend=args.backend,
+        margin_weight=args.margin_weight,
+        seeds=tuple(range(args.seeds)),
+        num_envs=args.num_envs,
+        total_steps=args.total_steps,
+        checkpoint_every=args.checkpoint_every,
+        device=args.device,
+        **_eval_overrides(args),
+    )
+
+
+def run_bundled(name: str, out: str | Path, eval_overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Evaluate a policy bundle (see :mod:`margin_rl.train.bundle`) like ``compare`` evaluates its runs."""
+    from margin_rl.train.bundle import load_bundle
+
+    bundle = load_bundle(name)
+    stored = dict(bundle.card["settings"])
+    stored["seeds"] = tuple(stored["seeds"])
+    settings = CompareSettings(**{**stored, **dict(eval_overrides or {})})
+    report = evaluate_variants(bundle.variants(), settings, out, bundle.card.get("env_options"))
+    report["bundle"] = {"name": bundle.name, "path": str(bundle.path), "card_table": bundle.card["table"]}
+    write_json(Path(out) / "compare.json", report)
+    return report
+
+
+def _provenance(command: list[str], wall_time_s: float) -> dict[str, Any]:
+    import os
+    import platform
+
+    from margin_rl.provenance import git_commit
+    from margin_rl.train.runs import versions
+
+    cpuinfo = Path("/proc/cpuinfo")
+    lines = cpuinfo.read_text().splitlines() if cpuinfo.is_file() else []
+    names = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
+    cpu = names[0] if names else platform.processor() or platform.machine()
+    machine = f"{cpu}, {os.cpu_count()} logical cores, {platform.system()}"
+    return {
+        "command": " ".join(command),
+        "commit": git_commit(),
+        "machine": machine,
+        "wall_time_s": wall_time_s,
+        "versions": versions(),
+    }
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console entry point."""
+    import time
+
     parser = build_parser()
     args = parser.parse_args(argv)
+    command = ["margin-rl-compare", *(sys.argv[1:] if argv is None else argv)]
     env_id = args.env or DEFAULT_ENV
+    t0 = time.perf_counter()
     try:
-        settings = CompareSettings(
-            env_id=env_id,
-            backend=args.backend,
-            margin_weight=args.margin_weight,
-            seeds=tuple(range(args.seeds)),
-            num_envs=args.num_envs,
-            total_steps=args.total_steps,
-            checkpoint_every=args.checkpoint_every,
-            eval_episodes=args.eval_episodes,
-            eval_seed=args.eval_seed,
-            forward_velocity=args.forward_velocity,
-            warmup_s=args.warmup_s,
-            device=args.device,
-        )
-        options = env_overrides(args)
-        options.pop("margin_weight", None)
-        out = args.out or Path("runs") / f"compare__{env_id.split('/')[-1]}__{args.backend}"
-        report = run_compare(settings, out, options, progress=not args.no_progress)
+        if args.bundled is not None:
+            out = args.out or Path("results") / f"bundled__{Path(args.bundled).name}"
+            report = run_bundled(args.bundled, out, _eval_overrides(args))
+        else:
+            settings = _settings_from_args(args)
+            options = env_overrides(args)
+            options.pop("margin_weight", None)
+            out = args.out or Path("runs") / f"compare__{env_id.split('/')[-1]}__{args.backend}"
+            report = run_compare(settings, out, options, progress=not args.no_progress)
+            if args.bundle is not None:
+                from margin_rl.train.bundle import write_bundle
+
+                write_bundle(report, args.bundle, _provenance(command, time.perf_counter() - t0))
+                print(f"wrote the policy bundle {args.bundle}")
     except (ValueError, TypeError) as exc:
         parser.error(str(exc))
     except KeyboardInterrupt as exc:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import shlex
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ import numpy as np
 import torch
 
 from margin_rl.dataset import Dataset, load_dataset
+from margin_rl.provenance import git_commit
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
 from margin_rl.stability.lambda_state import LAMBDA_SLICES, lambda_names
@@ -245,21 +245,6 @@ def gradient_check(
     }
 
 
-def _git_commit() -> str:
-    try:
-        root = Path(__file__).resolve().parents[2]
-        sha = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, check=True)
-        dirty = subprocess.run(
-            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        return sha.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-
-
 def train(
     data: str | Path,
     out: str | Path,
@@ -308,7 +293,7 @@ def train(
             "package_version": manifest.get("package_version"),
         },
         "analytic_settings": settings_dict,
-        "package_commit": _git_commit(),
+        "package_commit": git_commit(),
         "training_command": command,
         "training": {**config.__dict__, **summary},
         "test_metrics": metrics,

@@ -68,6 +68,19 @@ def test_paper_preset_has_exactly_two_terms(toy_weights: str) -> None:
     assert terms["reward_velocity_tracking"] == pytest.approx(1.0 / (np.exp(-x) + 2 + np.exp(x)))
 
 
+def test_alive_bonus_adds_a_constant_per_step_and_rejects_bad_values(toy_weights: str) -> None:
+    rewards = {}
+    for bonus in (0.0, 0.2):
+        env = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, margin_weight=0.3, alive_bonus=bonus)
+        env.reset(seed=4)
+        _, rewards[bonus], _, _, info = env.step(np.full(12, 0.1))
+    assert info["reward_alive"] == pytest.approx(0.2)
+    assert rewards[0.2] - rewards[0.0] == pytest.approx(0.2, abs=1e-9)  # same seed, same step: only the bonus
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(ValueError, match="alive_bonus"):
+            gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, alive_bonus=bad)
+
+
 def test_same_seed_same_rollout(toy_weights: str) -> None:
     def rollout(seed: int) -> np.ndarray:
         env = gym.make(

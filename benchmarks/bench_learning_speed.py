@@ -1,0 +1,105 @@
+"""Benchmark: wall-clock time until a PPO policy meets the learning target of issue 6 on this CPU.
+
+Target (ANYmal B, flat ground, command 0.75 m/s): mean absolute velocity-tracking error <= 0.15 m/s and fewer
+than 5 % falls over 20 s deterministic episodes, after <= 60 minutes of training.
+
+Usage:
+    python benchmarks/bench_learning_speed.py [--env margin_rl/AnymalB-v0] [--backend rsl] [--margin-weight 0]
+        [--seed 0] [--num-envs 128] [--total-steps 6000000] [--eval-every 500000] [--episodes 16] [--out DIR]
+
+One training run (``margin_rl.train.train.train``, exactly what ``margin-rl-train`` runs) writes a checkpoint every
+``--eval-every`` steps; the wall time of each checkpoint since the start of training is recorded when it is
+written. After training (so evaluation never counts as training time) every checkpoint is evaluated on
+``--episodes`` deterministic 20 s episodes from evaluation seed 1000 at 0.75 m/s, and the table (steps, minutes,
+velocity error, falls, target met) is printed as Markdown and written to ``<out>/learning_speed.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("GIT_PYTHON_REFRESH", "quiet")
+
+VELOCITY_ERROR_TARGET = 0.15  # m/s
+FALL_FRACTION_TARGET = 0.05  # strictly below
+TIME_TARGET_MIN = 60.0
+
+
+def train_with_timeline(args: argparse.Namespace, run_dir: Path) -> list[tuple[int, float, Path]]:
+    """Train one run; returns [(env steps, seconds since training started, checkpoint)] per checkpoint."""
+    from margin_rl.train.train import make_spec, train
+
+    margin = {"margin_weight": args.margin_weight, "margin": "learned" if args.margin_weight > 0 else "none"}
+    spec = make_spec(
+        args.env,
+        args.backend,
+        margin,
+        None,
+        seed=args.seed,
+        num_envs=args.num_envs,
+        total_steps=args.total_steps,
+        checkpoint_every=args.eval_every,
+    )
+    timeline: list[tuple[int, float, Path]] = []
+    t0 = time.perf_counter()
+    train(
+        spec,
+        run_dir,
+        progress=True,
+        on_checkpoint=lambda path, steps: timeline.append((steps, time.perf_counter() - t0, path)),
+    )
+    return timeline
+
+
+def evaluate_timeline(timeline: list[tuple[int, float, Path]], episodes: int) -> list[dict[str, float]]:
+    """Deterministic evaluation of every checkpoint: velocity error and fall fraction."""
+    from margin_rl.train.evaluate import evaluate
+
+    rows = []
+    for steps, seconds, path in timeline:
+        report, _ = evaluate(
+            path, episodes=episodes, seed=1000, forward_velocity=0.75, out_dir=path.parent / "eval" / path.stem
+        )
+        s = report["summary"]
+        error, falls = s["velocity_error_mean"]["mean"], s["fell"]["mean"]
+        met = error <= VELOCITY_ERROR_TARGET and falls < FALL_FRACTION_TARGET and seconds / 60 <= TIME_TARGET_MIN
+        rows.append({"env_steps": steps, "minutes": seconds / 60, "velocity_error": error, "falls": falls, "met": met})
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env", default="margin_rl/AnymalB-v0")
+    parser.add_argument("--backend", default="rsl", choices=("rsl", "sb3"))
+    parser.add_argument("--margin-weight", type=float, default=0.0)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--num-envs", type=int, default=128)
+    parser.add_argument("--total-steps", type=int, default=6_000_000)
+    parser.add_argument("--eval-every", type=int, default=500_000)
+    parser.add_argument("--episodes", type=int, default=16)
+    parser.add_argument("--out", type=Path, default=Path("runs") / "bench_learning_speed")
+    args = parser.parse_args()
+    if args.out.exists():
+        parser.error(f"{args.out} exists: give a fresh --out (the timeline needs a run from step 0)")
+    timeline = train_with_timeline(args, args.out)
+    rows = evaluate_timeline(timeline, args.episodes)
+    print(f"\n{args.env}, {args.backend}, margin weight {args.margin_weight:g}, seed {args.seed}, {args.num_envs} envs")
+    print(f"{args.episodes} deterministic 20 s episodes per checkpoint, command 0.75 m/s\n")
+    print("| env steps | training time [min] | velocity error [m/s] | falls | target met |")
+    print("|---|---|---|---|---|")
+    for r in rows:
+        met = "yes" if r["met"] else "no"
+        print(f"| {r['env_steps']:,} | {r['minutes']:.1f} | {r['velocity_error']:.3f} | {r['falls']:.2f} | {met} |")
+    first = next((r for r in rows if r["met"]), None)
+    verdict = f"first met at {first['minutes']:.1f} min ({first['env_steps']:,} steps)" if first else "not met"
+    print(f"\ntarget (error <= {VELOCITY_ERROR_TARGET} m/s, falls < {FALL_FRACTION_TARGET:.0%}): {verdict}")
+    from margin_rl.train.runs import write_json
+
+    write_json(args.out / "learning_speed.json", {"args": {k: str(v) for k, v in vars(args).items()}, "rows": rows})
+
+
+if __name__ == "__main__":
+    main()

@@ -1,13 +1,21 @@
 """PPO through Stable-Baselines3, with atomic checkpoints, exact resume, stop at a rollout boundary.
 
-PPO itself is SB3's. :class:`TrainingCallback` logs the episode metrics (the same TensorBoard tags as the
-rsl-rl backend), throughput, drives the progress bar, writes ``<run>/checkpoints/ckpt_<steps>.zip`` every
-``checkpoint_every`` steps at the start of a rollout (after the previous update, a consistent state) and, when a
-stop is requested, writes one there and ends ``learn`` before any new data is collected.
+PPO itself is SB3's, on any SB3 ``VecEnv`` that also reports episode metrics
+(:class:`margin_rl.train.adapters.EpisodeMetricsSource`): :class:`~margin_rl.train.adapters.Sb3VecEnv` over the
+ANYmal core, or :class:`~margin_rl.train.adapters.Sb3GymVecEnv` over Gymnasium environments (generic path).
+:class:`TrainingCallback` logs those metrics (for ANYmal the same TensorBoard tags as the rsl-rl backend; for a
+generic environment ``Episode_Metrics/return``, ``/length``, the means of its numeric ``info`` values and
+``Episode_Reward/<term>`` for its ``info["reward_<term>"]``), throughput, drives the progress bar, writes
+``<run>/checkpoints/ckpt_<steps>.zip`` every ``checkpoint_every`` steps at the start of a rollout (after the
+previous update, a consistent state) and, when a stop is requested, writes one there and ends ``learn`` before
+any new data is collected.
 
 Resume: ``PPO.load`` restores the policy, optimizer and ``num_timesteps``; ``learn(reset_num_timesteps=False)``
 continues the step count, and the TensorBoard logger appends to the same folder. SB3 does not save its random
 generators, and episodes running at the stop are lost (the environments start fresh).
+
+The TorchScript export is the deterministic actor: the Gaussian mean clipped to the action box, as SB3's
+``predict(deterministic=True)`` returns it.
 """
 
 from __future__ import annotations
@@ -21,14 +29,16 @@ from typing import Any
 
 import numpy as np
 import torch
+from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
+from stable_baselines3.common.vec_env import VecEnv
 
 from margin_rl.atomic import atomic_write
-from margin_rl.train.adapters import Sb3VecEnv
+from margin_rl.train.adapters import EpisodeMetricsSource
 from margin_rl.train.config import Sb3PPOConfig
-from margin_rl.train.metrics import step_tags, tensorboard_tags
+from margin_rl.train.metrics import tensorboard_tags
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
     TORCHSCRIPT_FILE,
@@ -61,7 +71,7 @@ def save_model(model: PPO, path: Path) -> Path:
 class TrainingCallback(BaseCallback):
     """Metrics, progress, checkpoints and stop requests for SB3's PPO (see the module docstring)."""
 
-    def __init__(self, venv: Sb3VecEnv, run_dir: Path, checkpoint_every: int, hooks: RunHooks) -> None:
+    def __init__(self, venv: EpisodeMetricsSource, run_dir: Path, checkpoint_every: int, hooks: RunHooks) -> None:
         super().__init__(verbose=0)
         self.venv, self.run_dir, self.every, self.hooks = venv, run_dir, max(1, int(checkpoint_every)), hooks
         self.stopped = False
@@ -99,7 +109,7 @@ class TrainingCallback(BaseCallback):
         if self.stopped:  # checkpoint written at the rollout start; this step is not trained on
             return False
         logger = self.logger
-        for tag, value in step_tags(self.venv.last_info).items():
+        for tag, value in self.venv.step_summary().items():
             logger.record_mean(tag, value)
         for tag, values in tensorboard_tags(self.venv.stats_finished).items():
             for value in values[np.isfinite(values)]:
@@ -118,27 +128,38 @@ class TrainingCallback(BaseCallback):
         self._clock, self._clock_steps = now, steps
 
 
-def make_model(venv: Sb3VecEnv, ppo: Sb3PPOConfig, seed: int, device: str) -> PPO:
-    """A new SB3 PPO on the adapter."""
+def make_model(venv: VecEnv, ppo: Sb3PPOConfig, seed: int, device: str) -> PPO:
+    """A new SB3 PPO on the vector environment."""
     return PPO("MlpPolicy", venv, seed=seed, device=device, verbose=0, **ppo.ppo_kwargs(venv.num_envs))
 
 
 class _DeterministicActor(torch.nn.Module):
-    """SB3 MlpPolicy's deterministic action (the Gaussian mean, clipped to the action box) for TorchScript."""
+    """SB3 MlpPolicy's deterministic action (the Gaussian mean, clipped to the action box) for TorchScript.
 
-    def __init__(self, policy: Any) -> None:
+    The bounds are those of the model's ``Box`` action space ([-1, 1] for ANYmal), as in SB3's ``predict``.
+    """
+
+    def __init__(self, policy: Any, action_space: Any) -> None:
         super().__init__()
         self.features = copy.deepcopy(policy.pi_features_extractor).cpu()
         self.latent = copy.deepcopy(policy.mlp_extractor.policy_net).cpu()
         self.action_net = copy.deepcopy(policy.action_net).cpu()
+        self.register_buffer("low", torch.as_tensor(action_space.low, dtype=torch.float32))
+        self.register_buffer("high", torch.as_tensor(action_space.high, dtype=torch.float32))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        return torch.clamp(self.action_net(self.latent(self.features(obs))), -1.0, 1.0)
+        return torch.clamp(self.action_net(self.latent(self.features(obs))), self.low, self.high)
 
 
 def export_torchscript(model: PPO, path: Path) -> Path:
-    """Trace the deterministic actor into a TorchScript file (input: (N, obs) float32; output: (N, 12))."""
-    actor = _DeterministicActor(model.policy).eval()
+    """Trace the deterministic actor into a TorchScript file (input: (N, obs) float32; output: (N, actions)).
+
+    Raises:
+        ValueError: the model's action space is not a ``Box`` (no Gaussian mean to export).
+    """
+    if not isinstance(model.action_space, spaces.Box):
+        raise ValueError(f"TorchScript export needs a Box action space, the model has {model.action_space}")
+    actor = _DeterministicActor(model.policy, model.action_space).eval()
     example = torch.zeros(1, int(model.observation_space.shape[0]))
     buffer = io.BytesIO()
     with torch.no_grad(), torchscript_export():
@@ -149,7 +170,7 @@ def export_torchscript(model: PPO, path: Path) -> Path:
 
 
 def train_sb3(
-    venv: Sb3VecEnv,
+    venv: VecEnv,
     ppo: Sb3PPOConfig,
     run_dir: Path,
     seed: int,
@@ -160,7 +181,10 @@ def train_sb3(
     hooks: RunHooks,
     final_model: Path,
 ) -> tuple[int, bool, Path | None]:
-    """Run (or continue) SB3 PPO up to ``total_steps``; returns (env steps, stopped, TorchScript path)."""
+    """Run (or continue) SB3 PPO up to ``total_steps``; returns (env steps, stopped, TorchScript path).
+
+    ``venv`` must also be an :class:`~margin_rl.train.adapters.EpisodeMetricsSource` (read by the callback).
+    """
     if checkpoint is not None:
         warn_unpickling(checkpoint)
         model = PPO.load(checkpoint, env=venv, device=device)

@@ -1,4 +1,4 @@
-"""``train``: PPO (rsl-rl or Stable-Baselines3) on a margin_rl ANYmal environment.
+"""``train``: PPO (rsl-rl or Stable-Baselines3) on a margin_rl ANYmal environment or any Gymnasium id.
 
 Examples::
 
@@ -7,18 +7,33 @@ Examples::
     python -m margin_rl.train.train --backend sb3 --margin-weight 0 --run-dir runs/baseline
     python -m margin_rl.train.train --resume runs/baseline            # continue a stopped or killed run
     python -m margin_rl.train.train --resume runs/baseline --total-steps 10000000   # ... and extend it
+    python -m margin_rl.train.train --env margin_rl/SLIPHopper-v0 --backend sb3 --margin-weight 0.5 \\
+        --num-envs 8 --total-steps 20000 --env-option goal_velocity=0.5
 
-Each run directory (default ``runs/<env>__<backend>__mw<weight>__s<seed>__<time>``) holds ``config.json``
-(environment, PPO and run settings, package versions), TensorBoard events in ``tb/`` (every reward term, the
-margin, base linear/angular acceleration RMS and peak per axis, velocity-tracking error, stance width,
-terminations, throughput), checkpoints in ``checkpoints/`` (every ``--checkpoint-every`` steps, and on
-SIGINT/SIGTERM), and at the end ``final_model.pt|.zip`` plus ``policy_torchscript.pt`` (deterministic actor).
-See :mod:`margin_rl.train.runs` for the layout.
+Environments: the ANYmal ids (batched ``vector_entry_point``) run on the batched core with an ``EnvConfig``
+(``--env-option`` sets its fields; ``--margin``, ``--margin-weights``, ``--reward-preset``, ``--margin-weight``
+too), with either backend. Every other registered id takes the generic path (SB3 only, the default backend
+there; ``--backend rsl`` is an error): SB3's ``DummyVecEnv`` of ``gymnasium.make(id, **env_kwargs)``, where
+``--env-option KEY=VALUE`` sets a constructor keyword of the environment (or ``max_episode_steps``) and
+``--margin-weight`` its ``margin_weight`` keyword when it has one (``margin_rl/SLIPHopper-v0`` does); other
+names are an error listing the keywords it takes. See :mod:`margin_rl.train.adapters`.
+
+Each run directory (default ``runs/<env>__<backend>__mw<weight>__s<seed>__<time>``, without ``mw<weight>``
+for an environment without a margin weight) holds ``config.json`` (environment: ``env_config`` for ANYmal,
+``env_kwargs`` otherwise; PPO and run settings, package versions; ``--resume`` and ``evaluate`` rebuild the
+environment from it), TensorBoard events in ``tb/`` (ANYmal: every reward term, the margin, base linear/angular
+acceleration RMS and peak per axis, velocity-tracking error, stance width, terminations; generic: episode
+return and length, ``Episode_Reward/<term>`` for every ``info["reward_<term>"]``, means of the other numeric
+``info`` values, terminations; both: throughput and SB3's or rsl-rl's own losses), checkpoints in
+``checkpoints/`` (every ``--checkpoint-every`` steps, and on SIGINT/SIGTERM), and at the end
+``final_model.pt|.zip`` plus ``policy_torchscript.pt`` (deterministic actor). See :mod:`margin_rl.train.runs`
+for the layout.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 import time
@@ -57,36 +72,64 @@ from margin_rl.train.runs import (
 )
 
 DEFAULT_ENV = "margin_rl/AnymalB-v0"
-DEFAULT_BACKEND = "rsl"
+DEFAULT_BACKEND = "rsl"  # for ANYmal ids; the generic path has only "sb3"
+GENERIC_BACKEND = "sb3"
 DEFAULT_SEED = 1
 DEFAULT_NUM_ENVS = 128
 DEFAULT_TOTAL_STEPS = 5_000_000
 DEFAULT_CHECKPOINT_EVERY = 500_000
 
 
+def _generic_backend_error(env_id: str, backend: str) -> ValueError:
+    return ValueError(
+        f"{env_id} is not a batched margin_rl ANYmal environment, and the {backend} backend trains only those: "
+        f"train it with --backend {GENERIC_BACKEND}"
+    )
+
+
 @dataclass(frozen=True)
 class TrainSpec:
-    """Everything that defines a training run (written to ``config.json``)."""
+    """Everything that defines a training run (written to ``config.json``).
+
+    The environment is either a batched ANYmal one, ``env_config`` (``EnvConfig()`` when neither is given), or
+    a generic Gymnasium one, ``env_kwargs``: the keyword overrides of ``gymnasium.make(env_id, ...)`` (JSON
+    values, copied; see :func:`margin_rl.train.adapters.env_kwargs_for`). Build specs with :func:`make_spec`,
+    which picks the kind from the id's registration.
+    """
 
     env_id: str = DEFAULT_ENV
     backend: str = DEFAULT_BACKEND
     seed: int = DEFAULT_SEED
     num_envs: int = DEFAULT_NUM_ENVS
     total_steps: int = DEFAULT_TOTAL_STEPS  # environment steps (policy steps summed over environments)
-    env_config: EnvConfig = field(default_factory=EnvConfig)
+    env_config: EnvConfig | None = None  # ANYmal ids
     ppo: PPOConfig = field(default_factory=RslPPOConfig)
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY  # environment steps between checkpoints
     device: str = "cpu"  # learner device (the simulation always runs on the CPU)
+    env_kwargs: dict[str, Any] | None = field(default=None, hash=False)  # other ids (a dict cannot be hashed)
 
     def __post_init__(self) -> None:
+        if self.env_config is not None and self.env_kwargs is not None:
+            raise ValueError("a TrainSpec has either env_config (ANYmal ids) or env_kwargs (other ids), not both")
+        if self.env_kwargs is None and self.env_config is None:
+            object.__setattr__(self, "env_config", EnvConfig())  # frozen: set once, here
+        if self.env_kwargs is not None:  # a private JSON copy: the spec never shares the caller's dict
+            object.__setattr__(self, "env_kwargs", json.loads(json.dumps(self.env_kwargs, allow_nan=False)))
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.env_kwargs is not None and self.backend != GENERIC_BACKEND:
+            raise _generic_backend_error(self.env_id, self.backend)
         expected = RslPPOConfig if self.backend == "rsl" else Sb3PPOConfig
         if not isinstance(self.ppo, expected):
             raise TypeError(f"backend {self.backend!r} needs a {expected.__name__}, got {type(self.ppo).__name__}")
         for name in ("num_envs", "total_steps", "checkpoint_every"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+    @property
+    def is_anymal(self) -> bool:
+        """True for a batched ANYmal environment (``env_config``), False for a generic one (``env_kwargs``)."""
+        return self.env_kwargs is None
 
     @property
     def steps_per_iteration(self) -> int:
@@ -105,7 +148,8 @@ class TrainSpec:
 
     def backend_config(self, run: str = "") -> dict[str, Any]:
         """The exact settings handed to the backend (the rsl-rl ``train_cfg`` or SB3's PPO keyword arguments)."""
-        if isinstance(self.ppo, RslPPOConfig):
+        if isinstance(self.ppo, RslPPOConfig):  # rsl runs are ANYmal runs (__post_init__)
+            assert self.env_config is not None
             return self.ppo.runner_cfg(self.env_config.privileged_observations, self.save_interval, run)
         kwargs = self.ppo.ppo_kwargs(self.num_envs)
         policy = dict(kwargs.pop("policy_kwargs"))
@@ -113,6 +157,8 @@ class TrainSpec:
         return {**kwargs, "policy_kwargs": policy}
 
     def to_json(self) -> dict[str, Any]:
+        """JSON-ready dict: ``env_config`` for an ANYmal run (as before generic runs existed), else ``env_kwargs``."""
+        env = {"env_config": to_dict(self.env_config)} if self.is_anymal else {"env_kwargs": dict(self.env_kwargs)}
         return {
             "env_id": self.env_id,
             "backend": self.backend,
@@ -121,14 +167,20 @@ class TrainSpec:
             "total_steps": self.total_steps,
             "checkpoint_every": self.checkpoint_every,
             "device": self.device,
-            "env_config": to_dict(self.env_config),
+            **env,
             "ppo": to_dict(self.ppo),
         }
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> TrainSpec:
+        """Inverse of :meth:`to_json`; also reads the ``config.json`` of runs older than ``env_kwargs``."""
         backend = data["backend"]
         ppo_class = RslPPOConfig if backend == "rsl" else Sb3PPOConfig
+        env_kwargs = data.get("env_kwargs")
+        if env_kwargs is None and data.get("env_config") is None:
+            raise ValueError("run config has neither env_config (ANYmal) nor env_kwargs (other environments)")
+        if env_kwargs is not None and not isinstance(env_kwargs, dict):
+            raise TypeError(f"env_kwargs: expected a mapping, got {env_kwargs!r}")
         return cls(
             env_id=data["env_id"],
             backend=backend,
@@ -137,7 +189,8 @@ class TrainSpec:
             total_steps=int(data["total_steps"]),
             checkpoint_every=int(data["checkpoint_every"]),
             device=str(data.get("device", "cpu")),
-            env_config=from_dict(EnvConfig, data["env_config"], "env_config"),
+            env_config=None if env_kwargs is not None else from_dict(EnvConfig, data["env_config"], "env_config"),
+            env_kwargs=env_kwargs,
             ppo=from_dict(ppo_class, data["ppo"], "ppo"),
         )
 
@@ -161,6 +214,17 @@ class TrainResult:
         return self.session_steps / self.elapsed_s if self.elapsed_s > 0 else 0.0
 
 
+def default_backend(env_id: str) -> str:
+    """``rsl`` (:data:`DEFAULT_BACKEND`) for the batched ANYmal ids, ``sb3`` for every other id.
+
+    Raises:
+        ValueError: the id is not registered.
+    """
+    from margin_rl.train.adapters import is_batched_anymal
+
+    return DEFAULT_BACKEND if is_batched_anymal(env_id) else GENERIC_BACKEND
+
+
 def make_spec(
     env_id: str = DEFAULT_ENV,
     backend: str = DEFAULT_BACKEND,
@@ -168,12 +232,48 @@ def make_spec(
     ppo_overrides: dict[str, Any] | None = None,
     **run: Any,
 ) -> TrainSpec:
-    """A :class:`TrainSpec` from an id, EnvConfig field overrides, PPO field overrides and run settings."""
-    from margin_rl.train.adapters import env_config_for
+    """A :class:`TrainSpec` from an id, environment overrides, PPO field overrides and run settings.
 
-    env_config = apply_overrides(env_config_for(env_id), dict(env_overrides or {}))
+    ``env_overrides``: EnvConfig fields for the batched ANYmal ids, the environment's constructor keywords
+    (``margin_weight`` among them where it takes one) for every other id.
+
+    Raises:
+        ValueError: unknown id, or a generic id with the rsl backend.
+        TypeError: unknown option names or badly typed values.
+    """
+    from margin_rl.train.adapters import env_config_for, env_kwargs_for, is_batched_anymal
+
+    overrides = dict(env_overrides or {})
+    if is_batched_anymal(env_id):
+        env = {"env_config": apply_overrides(env_config_for(env_id), overrides)}
+    else:
+        if backend != GENERIC_BACKEND:  # before checking options: the backend is the first thing to fix
+            raise _generic_backend_error(env_id, backend)
+        env = {"env_kwargs": env_kwargs_for(env_id, overrides)}
     ppo = apply_overrides(default_ppo_config(backend), dict(ppo_overrides or {}))
-    return TrainSpec(env_id=env_id, backend=backend, env_config=env_config, ppo=ppo, **run)
+    return TrainSpec(env_id=env_id, backend=backend, ppo=ppo, **env, **run)
+
+
+def check_environment(spec: TrainSpec) -> None:
+    """Fail before a run directory is made when the spec's environment cannot be built as asked.
+
+    ANYmal: the learned margin's weights must load (:func:`~margin_rl.train.adapters.check_margin_available`).
+    Generic: the id must not be a batched ANYmal one, and one environment must build with ``env_kwargs`` and
+    have spaces the generic path trains (:func:`~margin_rl.train.adapters.check_gym_env`).
+
+    Raises:
+        ValueError: with a hint on what to change.
+    """
+    from margin_rl.train.adapters import check_gym_env, check_margin_available, is_batched_anymal
+
+    anymal_id = is_batched_anymal(spec.env_id)
+    if spec.is_anymal != anymal_id:
+        needed = "env_config" if anymal_id else "env_kwargs"
+        raise ValueError(f"{spec.env_id} needs a spec with {needed}; build the spec with make_spec")
+    if spec.is_anymal:
+        check_margin_available(spec.env_config)
+    else:
+        check_gym_env(spec.env_id, spec.env_kwargs)
 
 
 def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) -> Path:
@@ -248,12 +348,11 @@ def train(
     SIGINT/SIGTERM (or ``stop.request()``) stop at the next safe point with a checkpoint; ``on_checkpoint(path,
     steps)`` is called after every checkpoint. ``threads``: torch intra-op threads while training (see
     :func:`margin_rl.train.runs.torch_threads`; None keeps torch's setting). Raises FileExistsError when
-    ``run_dir`` already holds checkpoints and ``resume`` is False.
+    ``run_dir`` already holds checkpoints and ``resume`` is False, ValueError when the environment cannot be built
+    (:func:`check_environment`).
     """
-    from margin_rl.train.adapters import check_margin_available
-
     run_dir = Path(run_dir)
-    check_margin_available(spec.env_config)
+    check_environment(spec)
     checkpoint = latest_checkpoint(run_dir)
     if checkpoint is not None and not resume:
         raise FileExistsError(f"{run_dir} already holds checkpoints; use --resume to continue it, or another --run-dir")
@@ -298,26 +397,27 @@ def train(
 
 
 def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks: RunHooks) -> tuple[int, bool, Any]:
-    """Seed, build the core and its adapter, and hand over to the backend."""
+    """Seed, build the environments (the ANYmal core and its adapter, or the generic vector env), and hand over
+    to the backend."""
     import torch
-
-    from margin_rl.train.adapters import make_core
 
     torch.manual_seed(spec.seed)
     np.random.seed(spec.seed % 2**32)
-    core = make_core(spec.env_config, spec.num_envs, spec.seed)
     final = run_dir / final_model_name(spec.backend)
     if isinstance(spec.ppo, RslPPOConfig):
-        from margin_rl.train.adapters import RslVecEnv
+        from margin_rl.train.adapters import RslVecEnv, make_core
         from margin_rl.train.rsl_backend import train_rsl
 
-        env = RslVecEnv(core)
+        env = RslVecEnv(make_core(spec.env_config, spec.num_envs, spec.seed))
         cfg = spec.backend_config(run_dir.name)
         return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final)
-    from margin_rl.train.adapters import Sb3VecEnv
+    from margin_rl.train.adapters import Sb3VecEnv, make_core, make_gym_vec_env
     from margin_rl.train.sb3_backend import train_sb3
 
-    venv = Sb3VecEnv(core)
+    if spec.is_anymal:
+        venv = Sb3VecEnv(make_core(spec.env_config, spec.num_envs, spec.seed))
+    else:
+        venv = make_gym_vec_env(spec.env_id, spec.env_kwargs, spec.num_envs, spec.seed)
     total = spec.total_iterations * spec.steps_per_iteration
     return train_sb3(
         venv, spec.ppo, run_dir, spec.seed, spec.device, total, spec.checkpoint_every, checkpoint, hooks, final
@@ -330,14 +430,16 @@ def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks:
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:
     """Options that shape the environment (shared with compare)."""
     parser.add_argument("--env", default=None, help=f"registered environment id (default {DEFAULT_ENV})")
-    parser.add_argument("--margin", choices=("learned", "analytic", "none"), help="margin used by the env")
-    parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (default: bundled)")
-    parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (default paper)")
+    parser.add_argument("--margin", choices=("learned", "analytic", "none"), help="margin used by the env (ANYmal)")
+    parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (ANYmal; default: bundled)")
+    parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (ANYmal; default paper)")
     parser.add_argument(
         "--env-option",
         action="append",
         metavar="KEY=VALUE",
-        help="any EnvConfig field, VALUE in JSON, e.g. command='{\"forward_velocity\": [0.5, 1.0]}' (repeatable)",
+        help="ANYmal ids: any EnvConfig field, e.g. command='{\"forward_velocity\": [0.5, 1.0]}'; other ids: a "
+        "constructor keyword of the environment or max_episode_steps, e.g. goal_velocity=0.5. VALUE in JSON "
+        "(repeatable)",
     )
 
 
@@ -357,8 +459,17 @@ def build_parser() -> argparse.ArgumentParser:
         prog="margin-rl-train", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     add_env_arguments(parser)
-    parser.add_argument("--backend", choices=BACKENDS, default=None, help=f"PPO library (default {DEFAULT_BACKEND})")
-    parser.add_argument("--margin-weight", type=float, help="weight of the margin reward term (0: baseline)")
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default=None,
+        help=f"PPO library (default {DEFAULT_BACKEND} for ANYmal ids, {GENERIC_BACKEND}, the only one, for other ids)",
+    )
+    parser.add_argument(
+        "--margin-weight",
+        type=float,
+        help="weight of the margin reward term (0: baseline); other ids: their margin_weight keyword",
+    )
     parser.add_argument("--seed", type=int, default=None, help=f"random seed (default {DEFAULT_SEED})")
     parser.add_argument("--num-envs", type=int, default=None, help=f"parallel environments ({DEFAULT_NUM_ENVS})")
     parser.add_argument("--total-steps", type=int, default=None, help=f"environment steps ({DEFAULT_TOTAL_STEPS})")
@@ -391,8 +502,8 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         if changes:
             spec = TrainSpec.from_json({**spec.to_json(), **changes})
         return spec, args.resume, True
-    backend = args.backend or DEFAULT_BACKEND
     env_id = args.env or DEFAULT_ENV
+    backend = args.backend or default_backend(env_id)
     run = {
         "seed": DEFAULT_SEED if args.seed is None else args.seed,
         "num_envs": args.num_envs or DEFAULT_NUM_ENVS,
@@ -401,8 +512,17 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         "device": args.device or "cpu",
     }
     spec = make_spec(env_id, backend, env_overrides(args), parse_assignments(args.ppo_option, "--ppo-option"), **run)
-    run_dir = args.run_dir or args.runs_root / run_name(env_id, backend, spec.env_config.margin_weight, spec.seed)
+    run_dir = args.run_dir or args.runs_root / run_name(env_id, backend, _margin_weight(spec), spec.seed)
     return spec, run_dir, False
+
+
+def _margin_weight(spec: TrainSpec) -> float | None:
+    """The margin-reward weight of the spec's environment (None for a generic one without such a keyword)."""
+    if spec.is_anymal:
+        return spec.env_config.margin_weight
+    from margin_rl.train.adapters import margin_weight_of
+
+    return margin_weight_of(spec.env_id, spec.env_kwargs)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -413,9 +533,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         spec, run_dir, resume = spec_from_args(args)
-        from margin_rl.train.adapters import check_margin_available
-
-        check_margin_available(spec.env_config)
+        check_environment(spec)
     except (ValueError, TypeError, FileNotFoundError) as exc:
         parser.error(str(exc))
     command = list(sys.argv if argv is None else ["margin-rl-train", *argv])

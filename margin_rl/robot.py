@@ -24,7 +24,7 @@ import functools
 import importlib.resources
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import mujoco
 import numpy as np
@@ -205,7 +205,7 @@ def leg_inverse_kinematics(geometry: LegGeometry, foot_pos: np.ndarray) -> tuple
         target is unreachable when it is outside the workspace (distance conditions) or a solution
         angle is outside the joint limits.
     """
-    return _ik(
+    table = _IKTable.of(
         geometry.haa_origin,
         geometry.hfe_offset,
         geometry.kfe_offset,
@@ -213,54 +213,114 @@ def leg_inverse_kinematics(geometry: LegGeometry, foot_pos: np.ndarray) -> tuple
         geometry.lower,
         geometry.upper,
         np.asarray(geometry.knee_sign),
-        np.asarray(foot_pos, dtype=float),
     )
+    return _ik(table, np.asarray(foot_pos, dtype=float))
 
 
-def _ik(
-    haa: np.ndarray,
-    hfe: np.ndarray,
-    kfe: np.ndarray,
-    foot: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    knee_sign: np.ndarray,
-    p: np.ndarray,
-    clip: bool = False,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised IK core (see :func:`leg_inverse_kinematics`); geometry arrays broadcast against p.
+# Slack of the joint-limit test of the IK [rad]: a solution this close outside a limit still counts.
+_LIMIT_TOL = 1e-9
 
-    With ``clip`` an unreachable leg gets the nearest boundary solution (acos arguments and joint
-    angles clipped) instead of NaN; ``reachable`` is the same either way.
+
+class _IKTable(NamedTuple):
+    """The target-independent terms of :func:`_ik` for one leg (scalars) or stacked legs ((n,) arrays,
+    (n, 3) for the vectors and limits) [m, rad]; see :func:`leg_inverse_kinematics` for the maths.
+
+    Computed once per robot rather than in every IK call: for a single state the IK's time is numpy's
+    per-call overhead (~0.3 us a call), not arithmetic, and these terms were ~20 of its ~80 calls.
     """
-    r = p - haa
-    lat = hfe[..., 1] + kfe[..., 1] + foot[..., 1]
-    rho = np.hypot(r[..., 1], r[..., 2])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cos_haa = lat / rho
-        ok = np.abs(cos_haa) <= 1.0
-        q1 = _wrap_angle(np.arctan2(r[..., 2], r[..., 1]) + np.arccos(np.clip(cos_haa, -1.0, 1.0)))
-        # Target in the HIP frame (undo the HAA rotation), relative to the HFE joint, in the x-z plane.
-        c1, s1 = np.cos(q1), np.sin(q1)
-        tx = r[..., 0] - hfe[..., 0]
-        tz = -s1 * r[..., 1] + c1 * r[..., 2] - hfe[..., 2]
+
+    haa: np.ndarray  # HAA joint in the base frame
+    hfe_x: np.ndarray  # HFE joint in the HIP frame, x and z
+    hfe_z: np.ndarray
+    lateral: np.ndarray  # L_y
+    ax: np.ndarray  # thigh a = kfe_offset_xz
+    az: np.ndarray
+    bx: np.ndarray  # shank b = foot_offset_xz
+    bz: np.ndarray
+    norm_a_sq: np.ndarray  # |a|^2
+    norm_b_sq: np.ndarray  # |b|^2
+    knee_den: np.ndarray  # 2 |a| |b|
+    psi: np.ndarray  # angle from a to b
+    knee_sign: np.ndarray
+    lower: np.ndarray  # joint limits
+    upper: np.ndarray
+    lower_tol: np.ndarray  # joint limits widened by _LIMIT_TOL
+    upper_tol: np.ndarray
+
+    @classmethod
+    def of(
+        cls,
+        haa: np.ndarray,
+        hfe: np.ndarray,
+        kfe: np.ndarray,
+        foot: np.ndarray,
+        lower: np.ndarray,
+        upper: np.ndarray,
+        knee_sign: np.ndarray,
+    ) -> _IKTable:
+        """From the :class:`LegGeometry` arrays of one leg, or stacked along a leading leg axis."""
         ax, az = kfe[..., 0], kfe[..., 2]
         bx, bz = foot[..., 0], foot[..., 2]
         norm_a, norm_b = np.hypot(ax, az), np.hypot(bx, bz)
-        psi = np.arctan2(ax * bz - az * bx, ax * bx + az * bz)
-        cos_knee = (tx * tx + tz * tz - norm_a**2 - norm_b**2) / (2.0 * norm_a * norm_b)
-        ok &= np.abs(cos_knee) <= 1.0
-        q3 = _wrap_angle(psi + knee_sign * np.arccos(np.clip(cos_knee, -1.0, 1.0)))
+        return cls(
+            haa=haa,
+            hfe_x=hfe[..., 0],
+            hfe_z=hfe[..., 2],
+            lateral=hfe[..., 1] + kfe[..., 1] + foot[..., 1],
+            ax=ax,
+            az=az,
+            bx=bx,
+            bz=bz,
+            norm_a_sq=norm_a**2,
+            norm_b_sq=norm_b**2,
+            knee_den=2.0 * norm_a * norm_b,
+            psi=np.arctan2(ax * bz - az * bx, ax * bx + az * bz),
+            knee_sign=knee_sign,
+            lower=lower,
+            upper=upper,
+            lower_tol=lower - _LIMIT_TOL,
+            upper_tol=upper + _LIMIT_TOL,
+        )
+
+
+def _unit_clip(x: np.ndarray) -> np.ndarray:
+    """np.clip(x, -1, 1) (the same values, NaN included) without np.clip's Python-level overhead."""
+    return np.minimum(np.maximum(x, -1.0), 1.0)
+
+
+def _ik(t: _IKTable, p: np.ndarray, clip: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised IK core (see :func:`leg_inverse_kinematics`); the table broadcasts against p (..., 3).
+
+    With ``clip`` an unreachable leg gets the nearest boundary solution (acos arguments and joint
+    angles clipped) instead of NaN; ``reachable`` is the same either way.
+
+    Keep the operations, their order and numpy's functions (not the math module's: its acos and atan2
+    round differently in the last bit): the analytic margin's focused projection turns last-bit changes
+    of the joint angles into margin changes up to its focus_tol (0.26 mm measured on 1000 states), so
+    margins, and the datasets labelled with them, are reproducible only bit for bit.
+    """
+    r = p - t.haa
+    rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cos_haa = t.lateral / np.hypot(ry, rz)
+        q1 = _wrap_angle(np.arctan2(rz, ry) + np.arccos(_unit_clip(cos_haa)))
+        # Target in the HIP frame (undo the HAA rotation), relative to the HFE joint, in the x-z plane.
+        c1, s1 = np.cos(q1), np.sin(q1)
+        tx = rx - t.hfe_x
+        tz = -s1 * ry + c1 * rz - t.hfe_z
+        cos_knee = (tx * tx + tz * tz - t.norm_a_sq - t.norm_b_sq) / t.knee_den
+        q3 = _wrap_angle(t.psi + t.knee_sign * np.arccos(_unit_clip(cos_knee)))
         # Ry(q) acts on (x, z) as a rotation by -q, so q2 = angle(c) - angle(t).
         c3, s3 = np.cos(q3), np.sin(q3)
-        cx = ax + c3 * bx + s3 * bz
-        cz = az - s3 * bx + c3 * bz
+        cx = t.ax + c3 * t.bx + s3 * t.bz
+        cz = t.az - s3 * t.bx + c3 * t.bz
         q2 = _wrap_angle(np.arctan2(cz, cx) - np.arctan2(tz, tx))
-    q = np.stack([q1, q2, q3], axis=-1)
-    tol = 1e-9
-    ok &= np.all((q >= lower - tol) & (q <= upper + tol), axis=-1)
-    ok &= np.all(np.isfinite(p), axis=-1)
-    q = np.clip(q, lower, upper) if clip else np.where(ok[..., None], q, np.nan)
+    q = np.empty(r.shape)
+    q[..., 0], q[..., 1], q[..., 2] = q1, q2, q3
+    ok = (np.abs(cos_haa) <= 1.0) & (np.abs(cos_knee) <= 1.0)
+    ok &= ((q >= t.lower_tol) & (q <= t.upper_tol)).all(axis=-1)
+    ok &= np.isfinite(p).all(axis=-1)
+    q = np.minimum(np.maximum(q, t.lower), t.upper) if clip else np.where(ok[..., None], q, np.nan)
     return q, ok
 
 
@@ -371,15 +431,15 @@ class Robot:
         p = np.asarray(foot_pos, dtype=float)
         if p.shape[-2:] != (len(self.legs), 3):
             raise ValueError(f"foot_pos must have shape (..., {len(self.legs)}, 3), got {p.shape}")
-        q, reachable = _ik(*self._stacked_legs, p, clip=clip)
+        q, reachable = _ik(self._ik_table, p, clip=clip)
         return IKSolution(joint_pos=q.reshape(*q.shape[:-2], 3 * len(self.legs)), reachable=reachable)
 
     @functools.cached_property
-    def _stacked_legs(self) -> tuple[np.ndarray, ...]:
-        """Leg constants stacked along a leading leg axis, for the vectorised IK."""
+    def _ik_table(self) -> _IKTable:
+        """IK constants of the legs stacked along a leading leg axis, for the vectorised IK."""
         fields = ("haa_origin", "hfe_offset", "kfe_offset", "foot_offset", "lower", "upper")
         arrays = [np.stack([getattr(g, f) for g in self.legs]) for f in fields]
-        return (*arrays, np.array([g.knee_sign for g in self.legs]))
+        return _IKTable.of(*arrays, np.array([g.knee_sign for g in self.legs]))
 
     def inverse_kinematics_com_relative(
         self, feet_rel_com: np.ndarray, iterations: int = 10, tol: float = 3e-5
@@ -403,6 +463,8 @@ class Robot:
             ``(solution, com)``: the IK solution at the converged CoM and the CoM offsets (..., 3) [m].
         """
         p = np.asarray(feet_rel_com, dtype=float)
+        if p.shape[-2:] != (len(self.legs), 3):
+            raise ValueError(f"feet_rel_com must have shape (..., {len(self.legs)}, 3), got {p.shape}")
         single = p.ndim == 2
         newton, sensitivity, offset = self._com_fixed_point_newton
         # First-order initial guess: CoM linear in the feet positions about the standing pose,
@@ -411,15 +473,13 @@ class Robot:
         if single:
             com = np.asarray(com)
         for _ in range(iterations):
-            solution = self.inverse_kinematics(p + com[..., None, :], clip=True)
+            q, reachable = _ik(self._ik_table, p + com[..., None, :], clip=True)
+            q = q.reshape(*q.shape[:-2], 3 * len(self.legs))
             # Pinocchio is faster for one state, the closed form for batches; both agree to 1e-16.
-            q = solution.joint_pos
-            residual = (self.com_position(q) if single else self.com_positions(q)) - com
-            if residual.size == 0 or float(np.max(np.abs(residual))) < tol:
+            residual = (self._pin_com(q) if single else self.com_positions(q)) - com
+            if residual.size == 0 or float(np.abs(residual).max()) < tol:
                 # Converged: this iterate's configuration is within tol of the fixed point.
-                return IKSolution(
-                    np.where(np.repeat(solution.reachable, 3, axis=-1), q, np.nan), solution.reachable
-                ), com
+                return IKSolution(np.where(np.repeat(reachable, 3, axis=-1), q, np.nan), reachable), com
             # Newton step on c = F(c) with the map's Jacobian frozen at the standing pose:
             # c <- c + (I - dF/dc)^-1 (F(c) - c), instead of the linear rate of c <- F(c).
             com = com + residual @ newton.T
@@ -478,11 +538,18 @@ class Robot:
         self, joint_pos: np.ndarray, base_pos: np.ndarray | None = None, base_quat_wxyz: np.ndarray | None = None
     ) -> np.ndarray:
         """Pinocchio configuration vector from joint angles and an optional base pose (w, x, y, z)."""
+        quat = (1.0, 0.0, 0.0, 0.0) if base_quat_wxyz is None else base_quat_wxyz
+        q = self._pin_q(self._check_joint_pos(joint_pos), quat)
+        if base_pos is not None:
+            q[0:3] = base_pos
+        return q
+
+    def _pin_q(self, joint_pos: np.ndarray, base_quat_wxyz: Any = (1.0, 0.0, 0.0, 0.0)) -> np.ndarray:
+        """:meth:`pin_configuration` with the base at the origin, without argument checks."""
         q = np.zeros(self.pin_model.nq)
-        q[0:3] = np.zeros(3) if base_pos is None else base_pos
-        w, x, y, z = (1.0, 0.0, 0.0, 0.0) if base_quat_wxyz is None else base_quat_wxyz
+        w, x, y, z = base_quat_wxyz
         q[3:7] = (x, y, z, w)
-        q[self._pin_joint_q_idx] = self._check_joint_pos(joint_pos)
+        q[self._pin_joint_q_idx] = joint_pos
         return q
 
     def leg_jacobians(self, joint_pos: np.ndarray, base_rotation: np.ndarray | None = None) -> np.ndarray:
@@ -497,15 +564,7 @@ class Robot:
             (4, 3, 3): J[i] maps leg i's joint velocities [rad/s] to its foot velocity [m/s].
         """
         R = np.eye(3) if base_rotation is None else np.asarray(base_rotation, dtype=float)
-        q = self.pin_configuration(joint_pos, base_quat_wxyz=_matrix_to_quat_wxyz(R))
-        data = self._pin_data
-        pin.computeJointJacobians(self.pin_model, data, q)
-        pin.updateFramePlacements(self.pin_model, data)
-        out = np.empty((len(self.legs), 3, 3))
-        for i, (frame, v_idx) in enumerate(zip(self._pin_foot_frames, self._pin_leg_v_idx, strict=True)):
-            J = pin.getFrameJacobian(self.pin_model, data, frame, pin.LOCAL_WORLD_ALIGNED)
-            out[i] = J[:3, list(v_idx)]
-        return out
+        return self._leg_jacobians_at(self._rotated_configuration(joint_pos, R))
 
     def bias_torques(
         self,
@@ -550,28 +609,74 @@ class Robot:
             :class:`RigidBodyDynamics` with quantities expressed in W.
         """
         R = np.eye(3) if base_rotation is None else np.asarray(base_rotation, dtype=float)
+        return self._rigid_body_dynamics_at(self._rotated_configuration(joint_pos, R), R, com_acc, base_ang_acc)
+
+    def jacobians_and_dynamics(
+        self,
+        joint_pos: np.ndarray,
+        base_rotation: np.ndarray | None = None,
+        com_acc: np.ndarray | None = None,
+        base_ang_acc: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, RigidBodyDynamics]:
+        """``(leg_jacobians(...), rigid_body_dynamics(...))`` of one state, sharing their configuration.
+
+        Arguments as in :meth:`rigid_body_dynamics`; the results are those of the two methods.
+        """
+        R = np.eye(3) if base_rotation is None else np.asarray(base_rotation, dtype=float)
+        config = self._rotated_configuration(joint_pos, R)
+        return self._leg_jacobians_at(config), self._rigid_body_dynamics_at(config, R, com_acc, base_ang_acc)
+
+    def _rotated_configuration(self, joint_pos: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Pinocchio configuration with the base at the origin of W, rotated by R (3, 3)."""
+        return self._pin_q(self._check_joint_pos(joint_pos), _matrix_to_quat_wxyz(R))
+
+    @functools.cached_property
+    def _pin_leg_v_array(self) -> np.ndarray:
+        """(4, 3) velocity indices of each leg's joints in Pinocchio's tangent vector."""
+        return np.array(self._pin_leg_v_idx)
+
+    def _leg_jacobians_at(self, config: np.ndarray) -> np.ndarray:
+        """:meth:`leg_jacobians` at a Pinocchio configuration (its base orientation sets the frame)."""
+        model, data = self.pin_model, self._pin_data
+        pin.computeJointJacobians(model, data, config)
+        pin.updateFramePlacements(model, data)
+        out = np.empty((len(self.legs), 3, 3))
+        for i, (frame, v_idx) in enumerate(zip(self._pin_foot_frames, self._pin_leg_v_array, strict=True)):
+            J = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
+            out[i] = J[:3, v_idx]
+        return out
+
+    def _rigid_body_dynamics_at(
+        self, config: np.ndarray, R: np.ndarray, com_acc: np.ndarray | None, base_ang_acc: np.ndarray | None
+    ) -> RigidBodyDynamics:
+        """:meth:`rigid_body_dynamics` at a Pinocchio configuration whose base orientation is R."""
         c_ddot = np.zeros(3) if com_acc is None else np.asarray(com_acc, dtype=float)
         w_dot = np.zeros(3) if base_ang_acc is None else np.asarray(base_ang_acc, dtype=float)
         model, data = self.pin_model, self._pin_data
-        q = self.pin_configuration(joint_pos, base_quat_wxyz=_matrix_to_quat_wxyz(R))
         v = np.zeros(model.nv)
-        com = np.array(pin.centerOfMass(model, data, q))  # base origin at 0, axes of W
+        com = np.array(pin.centerOfMass(model, data, config))  # base origin at 0, axes of W
+        # w_dot x com, written out (np.cross has a large fixed overhead on 3-vectors).
+        (wx, wy, wz), (cx, cy, cz) = w_dot.tolist(), com.tolist()
+        w_cross_c = np.array([wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx])
         a = np.zeros(model.nv)
         # Pinocchio's free-flyer acceleration is expressed in the base frame.
-        a[0:3] = R.T @ (c_ddot - np.cross(w_dot, com))
+        a[0:3] = R.T @ (c_ddot - w_cross_c)
         a[3:6] = R.T @ w_dot
-        tau = pin.rnea(model, data, q, v, a)
-        dhg = pin.computeCentroidalMomentumTimeVariation(model, data, q, v, a)
+        tau = pin.rnea(model, data, config, v, a)
+        dhg = pin.computeCentroidalMomentumTimeVariation(model, data, config, v, a)
         return RigidBodyDynamics(
-            bias_torques=np.stack([tau[list(v_idx)] for v_idx in self._pin_leg_v_idx]),
+            bias_torques=tau[self._pin_leg_v_array],
             ang_momentum_rate=np.array(dhg.angular),
             com=com,
         )
 
     def com_position(self, joint_pos: np.ndarray) -> np.ndarray:
         """Whole-body CoM in the base frame [m] (Pinocchio)."""
-        q = self.pin_configuration(joint_pos)
-        return np.array(pin.centerOfMass(self.pin_model, self._pin_data, q))
+        return self._pin_com(self._check_joint_pos(joint_pos))
+
+    def _pin_com(self, joint_pos: np.ndarray) -> np.ndarray:
+        """:meth:`com_position` without the argument check."""
+        return np.array(pin.centerOfMass(self.pin_model, self._pin_data, self._pin_q(joint_pos)))
 
     # ----------------------------------------------------------------- helpers
     def _check_joint_pos(self, joint_pos: np.ndarray) -> np.ndarray:

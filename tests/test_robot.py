@@ -17,6 +17,7 @@ from margin_rl.robot import (
     RobotModelError,
     UnreachableFootError,
     available_robots,
+    leg_inverse_kinematics,
     load_robot,
     load_robot_from_xml,
     quat_wxyz_to_matrix,
@@ -234,6 +235,58 @@ def test_ik_respects_haa_limits_of_anymal_c() -> None:
     target = robot.foot_positions(q)[0]
     with pytest.raises(UnreachableFootError):
         robot.leg_ik("LF", target)
+
+
+def test_ik_of_one_leg_one_state_and_a_batch_agree_bit_for_bit(robot: margin_rl.Robot) -> None:
+    """leg_inverse_kinematics (one leg), inverse_kinematics of one state and of a batch run the same
+    operations on differently shaped arrays: identical angles and statuses, unreachable legs included."""
+    rng = np.random.default_rng(8)
+    feet = robot.foot_positions(robot.standing_joint_pos) + rng.uniform(-0.3, 0.3, size=(400, 4, 3))
+    for clip in (False, True):
+        batch = robot.inverse_kinematics(feet, clip=clip)
+        assert 0.1 < batch.reachable.mean() < 0.9  # both kinds of legs
+        for k in range(0, 400, 8):
+            one = robot.inverse_kinematics(feet[k], clip=clip)
+            np.testing.assert_array_equal(one.joint_pos, batch.joint_pos[k])
+            np.testing.assert_array_equal(one.reachable, batch.reachable[k])
+    batch = robot.inverse_kinematics(feet)
+    for i, g in enumerate(robot.legs):
+        q, ok = leg_inverse_kinematics(g, feet[:, i])
+        np.testing.assert_array_equal(q, batch.joint_pos[:, 3 * i : 3 * i + 3])
+        np.testing.assert_array_equal(ok, batch.reachable[:, i])
+
+
+def test_com_relative_ik_of_one_state_matches_a_batch_of_one(robot: margin_rl.Robot) -> None:
+    """One state (Pinocchio CoM) and a batch of one (closed-form CoM) take the same fixed-point steps,
+    and the converged configuration puts the reachable feet where they were asked, relative to its CoM."""
+    rng = np.random.default_rng(9)
+    q0 = robot.standing_joint_pos
+    rel = robot.foot_positions(q0) - robot.com_position(q0) + rng.uniform(-0.12, 0.12, size=(60, 4, 3))
+    for p in rel:
+        one, com = robot.inverse_kinematics_com_relative(p)
+        batch, com_batch = robot.inverse_kinematics_com_relative(p[None])
+        np.testing.assert_allclose(com, com_batch[0], rtol=0.0, atol=1e-12)
+        np.testing.assert_allclose(one.joint_pos, batch.joint_pos[0], rtol=0.0, atol=1e-12)
+        np.testing.assert_array_equal(one.reachable, batch.reachable[0])
+        if one.reachable.all():
+            q = one.joint_pos
+            err = robot.foot_positions(q) - robot.com_position(q) - p
+            assert np.abs(err).max() < 3e-5 + 1e-9
+    with pytest.raises(ValueError, match="shape"):
+        robot.inverse_kinematics_com_relative(np.zeros((3, 3)))
+
+
+def test_jacobians_and_dynamics_equal_the_separate_methods(robot: margin_rl.Robot) -> None:
+    rng = np.random.default_rng(10)
+    for q in random_joint_pos(robot, rng, 5):
+        R = quat_wxyz_to_matrix(random_unit_quat(rng))
+        com_acc, ang_acc = rng.normal(size=3), rng.normal(size=3)
+        jac, dyn = robot.jacobians_and_dynamics(q, R, com_acc, ang_acc)
+        np.testing.assert_array_equal(jac, robot.leg_jacobians(q, base_rotation=R))
+        ref = robot.rigid_body_dynamics(q, base_rotation=R, com_acc=com_acc, base_ang_acc=ang_acc)
+        np.testing.assert_array_equal(dyn.bias_torques, ref.bias_torques)
+        np.testing.assert_array_equal(dyn.ang_momentum_rate, ref.ang_momentum_rate)
+        np.testing.assert_array_equal(dyn.com, ref.com)
 
 
 def test_leg_ik_rejects_bad_arguments(robot: margin_rl.Robot) -> None:

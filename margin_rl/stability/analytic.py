@@ -37,6 +37,7 @@ NaN unless the status is "ok".
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import os
 import time
@@ -46,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from margin_rl.robot import Robot, load_robot
-from margin_rl.stability.icp import capture_point, stability_margin
+from margin_rl.stability.icp import stability_margin
 from margin_rl.stability.lambda_state import (
     LAMBDA_DIM,
     base_rotation_from_gravity_axis,
@@ -186,7 +187,7 @@ def contact_problem(
     if lam.shape != (LAMBDA_DIM,):
         raise ValueError(f"one lambda of shape ({LAMBDA_DIM},) is expected, got {lam.shape}")
     st = from_lambda(lam)
-    if not np.all((st.contacts == 0.0) | (st.contacts == 1.0)):
+    if not ((st.contacts == 0.0) | (st.contacts == 1.0)).all():
         raise ValueError(f"lambda contacts must be 0 or 1, got {st.contacts.tolist()}")
     if not st.mu > 0:
         raise ValueError(f"lambda mu must be positive, got {float(st.mu)}")
@@ -203,13 +204,15 @@ def contact_problem(
     q = ik.joint_pos
 
     # 3. Jacobians, bias torques and centroidal angular-momentum rate in H.
-    jacobians = robot.leg_jacobians(q, base_rotation=R)
-    dynamics = robot.rigid_body_dynamics(q, base_rotation=R, com_acc=st.com_acc, base_ang_acc=st.base_ang_acc)
+    jacobians, dynamics = robot.jacobians_and_dynamics(
+        q, base_rotation=R, com_acc=st.com_acc, base_ang_acc=st.base_ang_acc
+    )
 
     # 4. Contact points of the foot spheres, CoM height above them, ICP.
     normals = st.normals / np.linalg.norm(st.normals, axis=-1, keepdims=True)
     contact_points = st.feet - robot.foot_radius * normals
-    com_height = float(-np.mean(contact_points[stance, 2]))
+    heights = contact_points[stance, 2]
+    com_height = float(-(heights.sum() / heights.size))  # np.mean's operations, less overhead
     if not com_height > 0:
         return "infeasible", f"CoM is not above the stance feet (height {com_height:.3f} m)", q
     return ContactProblem(
@@ -228,7 +231,9 @@ def contact_problem(
         ext_torque=st.ext_torque,
         com_vel=st.com_vel,
         com_height=com_height,
-        capture_point=capture_point(np.zeros(2), st.com_vel[:2], com_height, g=robot.gravity),
+        # Eq. (5) with c_xy = 0 (H is centred on the CoM): xi = c_dot_xy / omega = c_dot_xy sqrt(z / g); the
+        # inputs are already checked (finite lambda, z > 0), which capture_point would repeat.
+        capture_point=st.com_vel[:2] * math.sqrt(com_height / robot.gravity),
         joint_pos=q,
         base_rotation=R,
     )

@@ -154,6 +154,9 @@ def test_margin_is_distance_to_boundary_inside_and_euclidean_outside(seed: int) 
     m_lines = stability_margin(region, pts)
     m_euc = stability_margin(region, pts, outside="euclidean")
     for p, ml, me in zip(pts, m_lines, m_euc, strict=True):
+        # One point at a time (its own code path) agrees with the batch (to rounding: BLAS products).
+        assert stability_margin(region, p) == pytest.approx(ml, abs=1e-12)
+        assert stability_margin(region, p, outside="euclidean") == pytest.approx(me, abs=1e-12)
         dist = min(segment_distance(p, v[i], v[(i + 1) % len(v)]) for i in range(len(v)))
         inside = bool(np.all(hull.equations[:, :2] @ p + hull.equations[:, 2] <= 0))
         if inside:

@@ -95,3 +95,18 @@ def test_gravity_axis_matches_mujoco_orientation(roll: float, pitch: float, yaw:
 def test_gravity_axis_must_be_unit() -> None:
     with pytest.raises(ValueError, match="unit vector"):
         base_rotation_from_gravity_axis(np.array([0.0, 0.0, 2.0]))
+    with pytest.raises(ValueError, match="unit vector"):
+        base_rotation_from_gravity_axis(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 2.0]]))
+    with pytest.raises(ValueError, match="unit vector"):
+        base_rotation_from_gravity_axis(np.array([np.nan, 0.0, 1.0]))
+
+
+def test_base_rotation_of_one_axis_matches_the_batch_bit_for_bit() -> None:
+    """One gravity axis takes its own (scalar) code path; it must give the batch's bits exactly."""
+    rng = np.random.default_rng(0)
+    e = gravity_axis_from_roll_pitch(rng.uniform(-0.6, 0.6, 300), rng.uniform(-0.6, 0.6, 300))
+    e *= rng.uniform(1.0 - 9e-4, 1.0 + 9e-4, size=(300, 1))  # within the unit-norm tolerance
+    e = np.vstack([e, [[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]])
+    batch = base_rotation_from_gravity_axis(e)
+    for axis, R in zip(e, batch, strict=True):
+        np.testing.assert_array_equal(base_rotation_from_gravity_axis(axis), R)

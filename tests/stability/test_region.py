@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog
@@ -614,6 +615,95 @@ def test_halfspaces_of_degenerate_polygons() -> None:
     assert stability_margin(hs, [0.5, 0.0]) == pytest.approx(0.0)
     assert stability_margin(hs, [0.5, 0.2]) == pytest.approx(-0.2)
     assert stability_margin(hs, [1.3, 0.0]) == pytest.approx(-0.3)
+
+
+# ----------------------------------------------------------------------------------------------
+# The conic program's assembly
+# ----------------------------------------------------------------------------------------------
+
+
+def reference_problem(args: tuple[Any, ...]) -> tuple[Any, np.ndarray, list[str]]:
+    """``(A, b, cones)`` of fr._build_problem assembled the plain way: dense row blocks stacked in the
+    documented order, rows with an infinite torque bound dropped, scipy's dense-to-CSC conversion."""
+    feet, normals, mu, jac, lo, hi, bias, force, moment, n_faces, w_max, extent = args
+    n = jac.shape[0]
+    n_var = 4 + 3 * n
+
+    def block_diag(blocks: np.ndarray) -> np.ndarray:
+        out = np.zeros((blocks.shape[0] * blocks.shape[1], n_var))
+        for i, blk in enumerate(blocks):
+            out[i * blk.shape[0] : (i + 1) * blk.shape[0], 4 + 3 * i : 7 + 3 * i] = blk
+        return out
+
+    eq = np.zeros((6, n_var))
+    eq[0:3, 4:] = np.tile(np.eye(3), n)
+    eq[3, 1], eq[4, 0], eq[5, 0], eq[5, 1] = -force[2], force[2], -force[1], force[0]
+    eq[3, 2] = eq[4, 3] = 1.0
+    for i, (px, py, pz) in enumerate(feet):
+        eq[3:6, 4 + 3 * i : 7 + 3 * i] = [[0.0, -pz, py], [pz, 0.0, -px], [-py, px, 0.0]]
+    box = np.zeros((8, n_var))
+    box[0:4, 0:2] = box[4:8, 2:4] = [[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]]
+    jt = np.transpose(jac, (0, 2, 1))
+    tau = block_diag(np.concatenate([jt, -jt], axis=1))
+    tau_b = np.concatenate([bias - lo, hi - bias], axis=1).ravel()
+    finite = np.isfinite(tau_b)
+    t1, t2 = fr._tangent_bases(normals)
+    if n_faces:
+        th = 2.0 * np.pi * np.arange(n_faces) / n_faces
+        d = np.cos(th)[None, :, None] * t1[:, None, :] + np.sin(th)[None, :, None] * t2[:, None, :]
+        faces = d - mu * math.cos(math.pi / n_faces) * normals[:, None, :]
+        fric = block_diag(np.concatenate([faces, -normals[:, None, :]], axis=1))
+        cones = ["ZeroConeT(6)", f"NonnegativeConeT({8 + finite.sum() + fric.shape[0]})"]
+    else:
+        fric = block_diag(-np.stack([mu * normals, t1, t2], axis=1))
+        cones = ["ZeroConeT(6)", f"NonnegativeConeT({8 + finite.sum()})"] + ["SecondOrderConeT(3)"] * n
+    a = np.vstack([eq, box, tau[finite], fric])
+    box_b = np.concatenate([np.full(4, extent), np.full(4, n * w_max)])
+    b = np.concatenate([force, moment, box_b, tau_b[finite], np.zeros(fric.shape[0])])
+    return sp.csc_matrix(a), b, cones
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("stance", [(True, True, True, True), (True, False, True, True), (True, False, False, True)])
+@pytest.mark.parametrize("friction", ["cone", ("pyramid", 6)])
+@pytest.mark.parametrize("infinite_bounds", [False, True])
+def test_problem_assembly_matches_the_plain_reference(
+    seed: int, stance: tuple[bool, ...], friction: Any, infinite_bounds: bool
+) -> None:
+    """The in-place Fortran-ordered assembly hands Clarabel exactly the reference CSC data (same entries,
+    same order, no explicit zeros), right-hand side and cones: the solver sees the same problem."""
+    kw = C.random_quadruped_case(np.random.default_rng(seed), stance)
+    if infinite_bounds:  # rows with an infinite bound are dropped
+        lo, hi = -kw["torque_limits"], kw["torque_limits"].copy()
+        lo[0, 1], hi[3, 2] = -np.inf, np.inf
+        kw["torque_limits"] = (lo, hi)
+    feet, nrm, jac, lo, hi, bias, _ = fr.validate_contact_arrays(
+        kw["feet"], kw["normals"], kw["stance"], kw["jacobians"], kw["torque_limits"], None
+    )
+    wrench = fr.gravito_inertial_wrench(
+        kw["mass"], kw["com_acc"], kw["ang_momentum_rate"], kw["ext_force"], kw["ext_torque"], G
+    )
+    args = (feet, nrm, kw["mu"], jac, lo, hi, bias, wrench[:3], wrench[3:], fr._parse_friction(friction), WM, 10.0)
+    prob = fr._build_problem(*args)
+    a_ref, b_ref, cones_ref = reference_problem(args)
+    assert prob.A.shape == a_ref.shape and prob.n_var == a_ref.shape[1]
+    np.testing.assert_array_equal(prob.A.indptr, a_ref.indptr)
+    np.testing.assert_array_equal(prob.A.indices, a_ref.indices)
+    np.testing.assert_array_equal(prob.A.data, a_ref.data)
+    np.testing.assert_array_equal(prob.b, b_ref)
+    assert [repr(c) for c in prob.cones] == cones_ref
+
+
+def test_dense_to_csc_matches_scipy() -> None:
+    rng = np.random.default_rng(0)
+    for shape in [(1, 1), (5, 3), (50, 16), (7, 1)]:
+        a = np.where(rng.random(shape) < 0.3, rng.normal(size=shape), 0.0)
+        a[:, 0] = 0.0  # an empty column
+        for dense in (a, np.asfortranarray(a)):
+            got, ref = fr._dense_to_csc(dense), sp.csc_matrix(dense)
+            np.testing.assert_array_equal(got.indptr, ref.indptr)
+            np.testing.assert_array_equal(got.indices, ref.indices)
+            np.testing.assert_array_equal(got.data, ref.data)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -12,6 +12,10 @@ One training run (``margin_rl.train.train.train``, exactly what ``margin-rl-trai
 written. After training (so evaluation never counts as training time) every checkpoint is evaluated on
 ``--episodes`` deterministic 20 s episodes from evaluation seed 1000 at 0.75 m/s, and the table (steps, minutes,
 velocity error, falls, target met) is printed as Markdown and written to ``<out>/learning_speed.json``.
+
+``--from-run RUN_DIR`` trains nothing and evaluates the checkpoints of an existing single-session run (e.g. one
+of a ``compare`` run's baselines), timing each checkpoint by its file's modification time against the session's
+start time recorded in ``config.json`` (whole seconds; the first checkpoint is written before the first update).
 """
 
 from __future__ import annotations
@@ -54,6 +58,20 @@ def train_with_timeline(args: argparse.Namespace, run_dir: Path) -> list[tuple[i
     return timeline
 
 
+def timeline_of_run(run_dir: Path) -> list[tuple[int, float, Path]]:
+    """[(env steps, seconds since the session started, checkpoint)] of a finished single-session run."""
+    from datetime import datetime
+
+    from margin_rl.train.runs import CHECKPOINT_DIR, CONFIG_FILE, checkpoint_steps, read_json
+
+    sessions = read_json(run_dir / CONFIG_FILE).get("sessions", [])
+    if len(sessions) != 1:
+        raise SystemExit(f"{run_dir}: {len(sessions)} training sessions; wall time is only defined for one")
+    start = datetime.strptime(sessions[0]["started"], "%Y-%m-%dT%H:%M:%S%z").timestamp()
+    checkpoints = sorted((run_dir / CHECKPOINT_DIR).glob("ckpt_*.pt"), key=checkpoint_steps)
+    return [(checkpoint_steps(p), p.stat().st_mtime - start, p) for p in checkpoints]
+
+
 def evaluate_timeline(timeline: list[tuple[int, float, Path]], episodes: int) -> list[dict[str, float]]:
     """Deterministic evaluation of every checkpoint: velocity error and fall fraction."""
     from margin_rl.train.evaluate import evaluate
@@ -81,11 +99,21 @@ def main() -> None:
     parser.add_argument("--eval-every", type=int, default=500_000)
     parser.add_argument("--episodes", type=int, default=16)
     parser.add_argument("--out", type=Path, default=Path("runs") / "bench_learning_speed")
+    parser.add_argument("--from-run", type=Path, help="evaluate the checkpoints of this finished run instead")
     args = parser.parse_args()
-    if args.out.exists():
+    if args.from_run is not None:
+        timeline, args.out = timeline_of_run(args.from_run), args.from_run
+    elif args.out.exists():
         parser.error(f"{args.out} exists: give a fresh --out (the timeline needs a run from step 0)")
-    timeline = train_with_timeline(args, args.out)
+    else:
+        timeline = train_with_timeline(args, args.out)
     rows = evaluate_timeline(timeline, args.episodes)
+    if args.from_run is not None:
+        from margin_rl.train.runs import CONFIG_FILE, read_json
+
+        run = read_json(args.from_run / CONFIG_FILE)
+        args.env, args.backend, args.seed, args.num_envs = run["env_id"], run["backend"], run["seed"], run["num_envs"]
+        args.margin_weight = run["env_config"]["margin_weight"]
     print(f"\n{args.env}, {args.backend}, margin weight {args.margin_weight:g}, seed {args.seed}, {args.num_envs} envs")
     print(f"{args.episodes} deterministic 20 s episodes per checkpoint, command 0.75 m/s\n")
     print("| env steps | training time [min] | velocity error [m/s] | falls | target met |")

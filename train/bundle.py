@@ -163,7 +163,10 @@ def write_bundle(report: dict[str, Any], dest: str | Path, provenance: dict[str,
             "settings": report["settings"],
             "env_options": report.get("env_options", {}),
             "provenance": provenance,
-            "table": {name: {"mean": v["mean"], "std": v["std"]} for name, v in report["variants"].items()},
+            "table": {
+                name: {"margin_weight": v["margin_weight"], "mean": v["mean"], "std": v["std"]}
+                for name, v in report["variants"].items()
+            },
             "policies": entries,
         }
         write_json(staging / CARD_FILE, card)
@@ -196,7 +199,7 @@ def _replace_folder(new: Path, dest: Path) -> None:
 
 def card_markdown(card: dict[str, Any]) -> str:
     """The card for people: what was trained, how, from which commit, and the measured table."""
-    from margin_rl.train.metrics import SUMMARY_METRICS
+    from margin_rl.train.metrics import summary_table
 
     s, p = card["settings"], card["provenance"]
     lines = [
@@ -214,21 +217,11 @@ def card_markdown(card: dict[str, Any]) -> str:
         f"Evaluation: {s['eval_episodes']} deterministic episodes from seed {s['eval_seed']}, command "
         f"{s['forward_velocity']:g} m/s, accelerations after {s['warmup_s']:g} s; mean ± std over training seeds.",
         "",
-        "| variant | " + " | ".join(SUMMARY_METRICS.values()) + " |",
-        "|---|" + "---|" * len(SUMMARY_METRICS),
     ]
-    for name, row in card["table"].items():
-        cells = [_cell(row["mean"].get(k), row["std"].get(k)) for k in SUMMARY_METRICS]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += summary_table(card["table"])
     lines += ["", "| policy | margin weight | seed | env steps | sha256 (first 12) |", "|---|---|---|---|---|"]
     for e in card["policies"]:
         steps = f"{e['env_steps']:,}" if e.get("env_steps") is not None else "?"
         digest = e["policy_sha256"][:12]
         lines.append(f"| `{e['policy']}` | {e['margin_weight']:g} | {e['seed']} | {steps} | {digest} |")
     return "\n".join(lines) + "\n"
-
-
-def _cell(mean: float | None, std: float | None) -> str:
-    if mean is None:
-        return "n/a"
-    return f"{mean:.4g} ± {std:.2g}" if std is not None else f"{mean:.4g}"

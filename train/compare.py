@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from margin_rl.train.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate
-from margin_rl.train.metrics import SUMMARY_METRICS, mean_std
+from margin_rl.train.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate, save_figure
+from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
 from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, read_json, write_json
 from margin_rl.train.train import (
     DEFAULT_BACKEND,
@@ -204,10 +204,7 @@ def plot_accelerations(examples: dict[str, Evaluation], path: Path, settings: Co
         f"{settings.env_id}, {settings.backend}: base acceleration, command {settings.forward_velocity:g} m/s "
         f"(seed {settings.seeds[0]}, evaluation seed {settings.eval_seed})"
     )
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_markdown(report: dict[str, Any], path: Path) -> Path:
@@ -221,12 +218,8 @@ def write_markdown(report: dict[str, Any], path: Path) -> Path:
         f"{s['eval_seed']}, command {s['forward_velocity']:g} m/s, accelerations after the first "
         f"{s['warmup_s']:g} s. Values: mean ± std over training seeds of each seed's mean over its episodes.",
         "",
-        "| variant | margin weight | " + " | ".join(SUMMARY_METRICS.values()) + " |",
-        "|---|---|" + "---|" * len(SUMMARY_METRICS),
     ]
-    for name, variant in report["variants"].items():
-        cells = [f"{variant['mean'][k]:.4g} ± {variant['std'][k]:.2g}" for k in SUMMARY_METRICS]
-        lines.append(f"| {name} | {variant['margin_weight']:g} | " + " | ".join(cells) + " |")
+    lines += summary_table(report["variants"])
     lines += ["", f"![base acceleration]({report['plot']})", ""]
     path.write_text("\n".join(lines))
     return path

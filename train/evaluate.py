@@ -188,6 +188,18 @@ def run_episodes(
     return Evaluation(ordered, recorder.arrays(core.dt), core.dt, frames, message)
 
 
+def save_figure(fig: Any, path: str | Path) -> Path:
+    """Lay out, write (creating the folder) and close a matplotlib figure; returns the path."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def plot_episode(evaluation: Evaluation, path: str | Path, title: str = "") -> Path:
     """Base accelerations, heading velocity, margin and stance width over the first episode (PNG)."""
     import matplotlib
@@ -217,12 +229,7 @@ def plot_episode(evaluation: Evaluation, path: str | Path, title: str = "") -> P
     for ax in axes:
         ax.grid(alpha=0.3)
     fig.suptitle(title or "evaluation episode")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 class _GymRecorder:
@@ -392,12 +399,7 @@ def plot_gym_episode(evaluation: Evaluation, path: str | Path, title: str = "", 
         if ax.lines:
             ax.legend(loc="upper right", fontsize=8)
     fig.suptitle(title or "evaluation episode")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_video(frames: list[np.ndarray], path: str | Path, fps: float) -> tuple[Path | None, str]:

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -234,3 +235,23 @@ def mean_std(values: Sequence[float]) -> tuple[float, float]:
     if array.size == 0:
         return math.nan, math.nan
     return float(array.mean()), float(array.std())
+
+
+def _mean_std_cell(mean: float | None, std: float | None) -> str:
+    if mean is None or not math.isfinite(mean):
+        return "n/a"
+    return f"{mean:.4g} ± {std:.2g}" if std is not None and math.isfinite(std) else f"{mean:.4g}"
+
+
+def summary_table(variants: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """Markdown lines of the comparison table: a header, then per variant its margin weight and the
+    mean ± std of every :data:`SUMMARY_METRICS` column (``variants[name]`` has ``margin_weight``, ``mean``
+    and ``std`` dicts; missing or non-finite values print as n/a)."""
+    lines = [
+        "| variant | margin weight | " + " | ".join(SUMMARY_METRICS.values()) + " |",
+        "|---|---|" + "---|" * len(SUMMARY_METRICS),
+    ]
+    for name, v in variants.items():
+        cells = [_mean_std_cell(v["mean"].get(k), v["std"].get(k)) for k in SUMMARY_METRICS]
+        lines.append(f"| {name} | {v['margin_weight']:g} | " + " | ".join(cells) + " |")
+    return lines

@@ -108,6 +108,19 @@ def load_bundle(name_or_path: str | Path) -> Bundle:
     return Bundle(folder.name, folder, card, tuple(runs))
 
 
+def margin_model_identity(run_config: dict[str, Any]) -> dict[str, Any] | None:
+    """Which learned margin a run's environment used: {"source": robot name or weights path, "sha256": of the
+    weights}, or None when the run used no learned margin. Stored per policy in the card, so that evaluating
+    a bundled policy with other margin weights than it was trained with can be detected."""
+    from margin_rl.stability import LearnedMargin
+
+    env = run_config.get("env_config") or {}
+    if env.get("margin") != "learned":
+        return None
+    source = env.get("margin_weights") or env["robot"]
+    return {"source": source, "sha256": LearnedMargin.load(source).card.get("sha256")}
+
+
 def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path, Path, dict[str, Any]]:
     """(TorchScript file, config.json, training facts) of one compare run; clear error when unfinished."""
     run_dir = Path(run["run_dir"])
@@ -116,7 +129,8 @@ def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path,
         if not path.is_file():
             raise ValueError(f"{path} is missing: the run of {variant!r}, seed {run['seed']} has not finished")
     progress = read_json(run_dir / PROGRESS_FILE) if (run_dir / PROGRESS_FILE).is_file() else {}
-    sessions = read_json(config).get("sessions", [])
+    run_config = read_json(config)
+    sessions = run_config.get("sessions", [])
     facts = {
         "variant": variant,
         "margin_weight": weight,
@@ -124,6 +138,7 @@ def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path,
         "env_steps": progress.get("env_steps"),
         "training_sessions": len(sessions),
         "steps_per_s_last_session": progress.get("session_steps_per_s"),
+        "learned_margin": margin_model_identity(run_config),
         "metrics": run["metrics"],
     }
     return policy, config, facts

@@ -55,6 +55,7 @@ def test_bundle_round_trip_evaluates_like_the_runs(tmp_path: Path, toy_weights: 
     card = json.loads((bundle_dir / CARD_FILE).read_text())
     assert card["provenance"]["command"].startswith("margin-rl-compare") and card["provenance"]["commit"]
     assert "| without margin |" in (bundle_dir / "CARD.md").read_text()
+    assert all(e["learned_margin"]["source"] == toy_weights for e in card["policies"])  # margin weights recorded
 
     evaluated = tmp_path / "evaluated"
     assert main(["--bundled", str(bundle_dir), "--out", str(evaluated)]) == 0

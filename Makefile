@@ -1,5 +1,6 @@
 # Two commands do all setup on a fresh machine:
-#   make demo   create .venv if missing, install torch (CPU) then margin_rl, run the main job
+#   make demo   create .venv if missing, install torch (CPU) then margin_rl, run the main job (evaluate the
+#               bundled policies: comparison plot and table in results/anymal_b)
 #   make test   same setup, then ruff and the full test suite
 # torch is installed first and explicitly: on these machines `torch==2.13.0` is a local CPU wheel,
 # while any other torch request (e.g. pulled in by a dependency) downloads GBs of CUDA packages.
@@ -35,8 +36,10 @@ $(STAMP): $(PY) pyproject.toml | gl-deps
 
 install: $(STAMP)
 
+# The main job: evaluate the bundled ANYmal B policies (with and without the margin term) and write the
+# comparison plot and table into results/anymal_b (a few minutes on CPU).
 demo: install
-	$(PY) -m margin_rl
+	$(PY) -m margin_rl.train.compare --bundled anymal_b --out results/anymal_b
 
 lint: install
 	$(PY) -m ruff check .

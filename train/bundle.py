@@ -228,6 +228,7 @@ def card_markdown(card: dict[str, Any]) -> str:
         f"- package commit: `{p.get('commit', '?')}`",
         f"- machine: {p.get('machine', '?')}",
         f"- wall time of the comparison (training and evaluation): {p.get('wall_time_s', float('nan')) / 60:.1f} min",
+        *([f"- note: {p['note']}"] if p.get("note") else []),
         "",
         f"Evaluation: {s['eval_episodes']} deterministic episodes from seed {s['eval_seed']}, command "
         f"{s['forward_velocity']:g} m/s, accelerations after {s['warmup_s']:g} s; mean ± std over training seeds.",

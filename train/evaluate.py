@@ -502,9 +502,26 @@ def evaluate(
     with torch_threads(1):  # see margin_rl.train.runs.torch_threads
         evaluation = run_episodes(policy, config, episodes, seed, warmup_s, render=video, max_steps=max_steps)
     plot = plot_episode(evaluation, out / "episode.png", f"{env_id}: {policy_path.name} ({policy.kind})")
+    fps = 1.0 / evaluation.dt
+    extra = {"forward_velocity": forward_velocity, "warmup_s": warmup_s, "env_config": to_dict(config)}
+    return _finish_report(policy, policy_path, env_id, seed, evaluation, plot, out, fps if video else None, extra)
+
+
+def _finish_report(
+    policy: LoadedPolicy,
+    policy_path: Path,
+    env_id: str,
+    seed: int,
+    evaluation: Evaluation,
+    plot: Path,
+    out: Path,
+    video_fps: float | None,
+    extra: Mapping[str, Any],
+) -> tuple[dict[str, Any], Evaluation]:
+    """Write the video (``video_fps`` not None) and ``metrics.json`` of an evaluation; returns (report, it)."""
     video_path, video_message = (None, "")
-    if video:
-        video_path, video_message = write_video(evaluation.frames, out / "episode.mp4", 1.0 / evaluation.dt)
+    if video_fps is not None:
+        video_path, video_message = write_video(evaluation.frames, out / "episode.mp4", video_fps)
         video_message = evaluation.render_message or video_message
     report = {
         "policy": str(policy_path),
@@ -512,8 +529,6 @@ def evaluate(
         "env_id": env_id,
         "seed": seed,
         "episodes": len(evaluation.episodes),
-        "forward_velocity": forward_velocity,
-        "warmup_s": warmup_s,
         "dt": evaluation.dt,
         "summary": evaluation.summary,
         "per_episode": evaluation.episodes,
@@ -521,7 +536,7 @@ def evaluate(
         "video": video_path.name if video_path is not None else None,
         "video_message": video_message or None,
         "out_dir": str(out),
-        "env_config": to_dict(config),
+        **extra,
     }
     write_json(out / "metrics.json", report)
     return report, evaluation
@@ -543,29 +558,9 @@ def _evaluate_gym(
     with torch_threads(1):  # small MLP on one observation at a time: threads only cost
         evaluation = run_gym_episodes(policy, env_id, env_kwargs, episodes, seed, render=video, max_steps=max_steps)
     plot = plot_gym_episode(evaluation, out / "episode.png", f"{env_id}: {policy_path.name} ({policy.kind})")
-    video_path, video_message = (None, "")
-    if video:
-        fps = evaluation.fps or 1.0
-        video_path, video_message = write_video(evaluation.frames, out / "episode.mp4", fps)
-        video_message = evaluation.render_message or video_message
-    report = {
-        "policy": str(policy_path),
-        "kind": policy.kind,
-        "env_id": env_id,
-        "seed": seed,
-        "episodes": len(evaluation.episodes),
-        "max_steps": max_steps,
-        "dt": evaluation.dt,
-        "summary": evaluation.summary,
-        "per_episode": evaluation.episodes,
-        "plot": plot.name,
-        "video": video_path.name if video_path is not None else None,
-        "video_message": video_message or None,
-        "out_dir": str(out),
-        "env_kwargs": env_kwargs,
-    }
-    write_json(out / "metrics.json", report)
-    return report, evaluation
+    fps = (evaluation.fps or 1.0) if video else None
+    extra = {"max_steps": max_steps, "env_kwargs": env_kwargs}
+    return _finish_report(policy, policy_path, env_id, seed, evaluation, plot, out, fps, extra)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,9 +1,16 @@
-"""Provenance of produced artifacts (weights, policies, cards): the package commit they came from."""
+"""Provenance of produced artifacts (weights, policies, cards): the package commit they came from and the
+checksums their cards record."""
 
 from __future__ import annotations
 
+import hashlib
 import subprocess
 from pathlib import Path
+
+
+def sha256_file(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes (what model and policy cards record and verify at load)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def git_commit() -> str:

@@ -15,7 +15,6 @@ policy is refused instead of silently evaluated.
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import os
 import shutil
 import tempfile
@@ -23,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from margin_rl.provenance import sha256_file
 from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, TORCHSCRIPT_FILE, read_json, write_json
 
 BUNDLE_ROOT = Path(__file__).resolve().parent / "bundled"
@@ -66,10 +66,6 @@ def bundled_names() -> tuple[str, ...]:
     return tuple(sorted(p.name for p in BUNDLE_ROOT.iterdir() if (p / CARD_FILE).is_file()))
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def _slug(variant: str) -> str:
     return variant.replace(" ", "_")
 
@@ -97,7 +93,7 @@ def load_bundle(name_or_path: str | Path) -> Bundle:
             path = folder / entry[key]
             if not path.is_file():
                 raise ValueError(f"{folder}: {entry[key]} listed in {CARD_FILE} is missing; reinstall margin_rl")
-            digest = _sha256(path)
+            digest = sha256_file(path)
             if digest != entry[f"{key}_sha256"]:
                 raise ValueError(
                     f"{path}: checksum mismatch (card {entry[f'{key}_sha256']}, file {digest}); the file was changed "
@@ -168,8 +164,8 @@ def write_bundle(report: dict[str, Any], dest: str | Path, provenance: dict[str,
                         **facts,
                         "policy": f"{folder}/{POLICY_FILE}",
                         "config": f"{folder}/{CONFIG_FILE}",
-                        "policy_sha256": _sha256(staging / folder / POLICY_FILE),
-                        "config_sha256": _sha256(staging / folder / CONFIG_FILE),
+                        "policy_sha256": sha256_file(staging / folder / POLICY_FILE),
+                        "config_sha256": sha256_file(staging / folder / CONFIG_FILE),
                     }
                 )
         card = {

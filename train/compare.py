@@ -35,7 +35,7 @@ import numpy as np
 
 from margin_rl.train.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate, save_figure
 from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
-from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, read_json, write_json
+from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, final_model_name, read_json, write_json
 from margin_rl.train.train import (
     DEFAULT_BACKEND,
     DEFAULT_ENV,
@@ -94,7 +94,7 @@ def _run_spec(settings: CompareSettings, weight: float, seed: int, overrides: di
 
 def _train_or_reuse(spec: TrainSpec, run_dir: Path, progress: bool) -> Path:
     """Train a run, resume a stopped one, or reuse a finished one; returns its final model."""
-    final = run_dir / ("final_model.zip" if spec.backend == "sb3" else "final_model.pt")
+    final = run_dir / final_model_name(spec.backend)
     finished = (run_dir / PROGRESS_FILE).is_file() and read_json(run_dir / PROGRESS_FILE).get("finished")
     if finished and final.is_file():
         print(f"reusing finished run {run_dir}")

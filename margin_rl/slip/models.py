@@ -21,7 +21,6 @@ twin in :mod:`margin_rl.slip.train`, so this module does not import torch.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from margin_rl.provenance import sha256_file
 from margin_rl.slip.margin import BOX_HIGH, BOX_LOW
 
 __all__ = [
@@ -37,7 +37,6 @@ __all__ = [
     "MLP",
     "Bundle",
     "load_bundle",
-    "sha256_file",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -157,11 +156,6 @@ class MLP:
     def load(cls, path: Path | str) -> MLP:
         with np.load(Path(path), allow_pickle=False) as data:
             return cls.from_arrays({k: data[k] for k in data.files})
-
-
-def sha256_file(path: Path | str) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 @dataclass(frozen=True)

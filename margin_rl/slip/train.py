@@ -35,9 +35,10 @@ from numpy.typing import NDArray
 from torch import nn
 
 from margin_rl.atomic import atomic_savez, atomic_write_bytes
+from margin_rl.provenance import sha256_file
 from margin_rl.slip.dataset import SlipDataset, load_dataset
 from margin_rl.slip.margin import PREDICTION_WEIGHTS
-from margin_rl.slip.models import BUNDLE_DIR, MLP, box_normalisation, sha256_file
+from margin_rl.slip.models import BUNDLE_DIR, MLP, box_normalisation
 
 __all__ = [
     "PAPER_OPERATING_POINT",

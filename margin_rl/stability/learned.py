@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from margin_rl.atomic import atomic_savez, atomic_write_text
+from margin_rl.provenance import sha256_file
 from margin_rl.stability.lambda_state import LAMBDA_DIM, LAMBDA_FIELDS, check_lambda, lambda_names
 
 ARCHITECTURE: tuple[int, ...] = (LAMBDA_DIM, 256, 128, 128, 1)
@@ -124,10 +125,6 @@ class MarginWeights:
         return w
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def save_weights(weights: MarginWeights, path: str | Path, card: dict[str, object]) -> dict[str, object]:
     """Write ``<path>.npz`` and its model card ``<path>.json`` (with the npz's sha256 and layout)."""
     path = Path(path).with_suffix("")
@@ -142,7 +139,7 @@ def save_weights(weights: MarginWeights, path: str | Path, card: dict[str, objec
         "lambda_names": list(lambda_names()),
         **card,
         "file": npz.name,
-        "sha256": _sha256(npz),
+        "sha256": sha256_file(npz),
     }
     atomic_write_text(path.with_suffix(".json"), json.dumps(full_card, indent=2) + "\n")
     return full_card
@@ -196,7 +193,7 @@ class LearnedMargin:
             card = json.loads(card_path.read_text())
         except json.JSONDecodeError as exc:
             raise WeightsError(f"{card_path}: malformed model card ({exc})") from exc
-        digest = _sha256(npz)
+        digest = sha256_file(npz)
         if card.get("sha256") != digest:
             raise WeightsError(
                 f"{npz}: checksum mismatch (card {card.get('sha256')!r}, file {digest!r}): "

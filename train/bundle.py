@@ -6,10 +6,14 @@ A bundle is a folder ``margin_rl/train/bundled/<name>/`` (or any folder given by
     CARD.md                          the same for people, with the comparison table
     <variant>__s<seed>/policy.pt     TorchScript deterministic actor (observations -> actions; no pickle)
     <variant>__s<seed>/config.json   the training run's config.json: the environment to evaluate it in
+    learned_margin/<robot>.npz/.json the learned-margin weights and card the policies were trained with
 
 ``compare --bundle <dir>`` writes one from a finished comparison; ``compare --bundled <name>`` evaluates one
 (the README's main job). Loading verifies every file against the card's checksums, so a truncated or edited
-policy is refused instead of silently evaluated.
+policy is refused instead of silently evaluated. Carrying its own learned-margin weights keeps a bundle
+reproducible when the package's bundled margin weights are retrained: the policies' actions never depend on
+the margin (it is not a policy observation), but their reward did, and the card's margin column is measured
+with these weights.
 """
 
 from __future__ import annotations
@@ -29,7 +33,9 @@ BUNDLE_ROOT = Path(__file__).resolve().parent / "bundled"
 CARD_FILE = "card.json"
 CARD_MARKDOWN = "CARD.md"
 POLICY_FILE = "policy.pt"
-CARD_FORMAT = 1
+MARGIN_FOLDER = "learned_margin"
+CARD_FORMAT = 2
+READABLE_CARD_FORMATS = (1, 2)  # format 1: no copy of the learned-margin weights
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,11 @@ class Bundle:
     path: Path
     card: dict[str, Any]
     runs: tuple[BundledRun, ...]
+    margin_weights: Path | None = None  # the learned-margin .npz the policies were trained with (format >= 2)
+
+    def env_overrides(self) -> dict[str, Any]:
+        """EnvConfig overrides that evaluate the policies with the margin they were trained with."""
+        return {} if self.margin_weights is None else {"margin_weights": str(self.margin_weights)}
 
     def variants(self) -> dict[str, tuple[float, list[tuple[int, Path]]]]:
         """Variant name -> (margin weight, [(training seed, policy file), ...])."""
@@ -85,23 +96,75 @@ def load_bundle(name_or_path: str | Path) -> Bundle:
             f"holding {CARD_FILE} (written by `compare --bundle`)"
         )
     card = read_json(folder / CARD_FILE)
-    if card.get("format") != CARD_FORMAT:
-        raise ValueError(f"{folder / CARD_FILE}: card format {card.get('format')!r}, this package reads {CARD_FORMAT}")
+    if card.get("format") not in READABLE_CARD_FORMATS:
+        raise ValueError(
+            f"{folder / CARD_FILE}: card format {card.get('format')!r}, this package reads {READABLE_CARD_FORMATS}"
+        )
     runs = []
     for entry in card["policies"]:
         for key in ("policy", "config"):
-            path = folder / entry[key]
-            if not path.is_file():
-                raise ValueError(f"{folder}: {entry[key]} listed in {CARD_FILE} is missing; reinstall margin_rl")
-            digest = sha256_file(path)
-            if digest != entry[f"{key}_sha256"]:
-                raise ValueError(
-                    f"{path}: checksum mismatch (card {entry[f'{key}_sha256']}, file {digest}); the file was changed "
-                    "or truncated: reinstall margin_rl or rewrite the bundle with `compare --bundle`"
-                )
+            _verify(folder, entry[key], entry[f"{key}_sha256"])
         weight, seed = float(entry["margin_weight"]), int(entry["seed"])
         runs.append(BundledRun(entry["variant"], weight, seed, folder / entry["policy"]))
-    return Bundle(folder.name, folder, card, tuple(runs))
+    margin = card.get("learned_margin_weights")
+    margin_weights = None
+    if margin is not None:
+        for key in ("npz", "card"):
+            _verify(folder, margin[key], margin[f"{key}_sha256"])
+        margin_weights = folder / margin["npz"]
+        trained_with = {e["learned_margin"]["sha256"] for e in card["policies"] if e.get("learned_margin")}
+        if trained_with - {margin["npz_sha256"]}:
+            raise ValueError(
+                f"{folder / CARD_FILE}: policies were trained with learned-margin weights {sorted(trained_with)}, "
+                f"but the bundle carries {margin['npz_sha256']}; rewrite the bundle with `compare --bundle`"
+            )
+    return Bundle(folder.name, folder, card, tuple(runs), margin_weights)
+
+
+def _verify(folder: Path, relative: str, sha256: str) -> None:
+    """Refuse a bundle file that is missing or differs from the card's checksum."""
+    path = folder / relative
+    if not path.is_file():
+        raise ValueError(f"{folder}: {relative} listed in {CARD_FILE} is missing; reinstall margin_rl")
+    digest = sha256_file(path)
+    if digest != sha256:
+        raise ValueError(
+            f"{path}: checksum mismatch (card {sha256}, file {digest}); the file was changed "
+            "or truncated: reinstall margin_rl or rewrite the bundle with `compare --bundle`"
+        )
+
+
+def copy_margin_weights(entries: list[dict[str, Any]], folder: Path) -> dict[str, Any] | None:
+    """Copy the learned-margin weights (npz + card) that the runs in ``entries`` were trained with into
+    ``folder/learned_margin/``; returns the card record, or None when no run used a learned margin.
+
+    Raises:
+        ValueError: the runs used different weights (one bundle carries one margin model), or the weights
+            changed since training (their checksum no longer matches the one recorded for the runs).
+    """
+    from margin_rl.stability.learned import LearnedMargin, weights_path
+
+    identities = {
+        (e["learned_margin"]["source"], e["learned_margin"]["sha256"]) for e in entries if e["learned_margin"]
+    }
+    if not identities:
+        return None
+    if len(identities) > 1:
+        raise ValueError(f"the runs were trained with different learned-margin weights {sorted(identities)}")
+    ((source, sha256),) = identities
+    npz = weights_path(source)
+    if LearnedMargin.load(npz).card.get("sha256") != sha256:
+        raise ValueError(
+            f"{npz} changed since the runs were trained with it (sha256 {sha256}); the bundle must carry the "
+            "weights the policies were trained with: restore them or retrain the policies"
+        )
+    (folder / MARGIN_FOLDER).mkdir(exist_ok=True)
+    record: dict[str, Any] = {"source": source}
+    for key, path in (("npz", npz), ("card", npz.with_suffix(".json"))):
+        relative = f"{MARGIN_FOLDER}/{path.name}"
+        shutil.copyfile(path, folder / relative)
+        record[key], record[f"{key}_sha256"] = relative, sha256_file(folder / relative)
+    return record
 
 
 def margin_model_identity(run_config: dict[str, Any]) -> dict[str, Any] | None:
@@ -179,6 +242,7 @@ def write_bundle(report: dict[str, Any], dest: str | Path, provenance: dict[str,
                 for name, v in report["variants"].items()
             },
             "policies": entries,
+            "learned_margin_weights": copy_margin_weights(entries, staging),
         }
         write_json(staging / CARD_FILE, card)
         (staging / CARD_MARKDOWN).write_text(card_markdown(card))
@@ -225,6 +289,14 @@ def card_markdown(card: dict[str, Any]) -> str:
         f"- machine: {p.get('machine', '?')}",
         f"- wall time of the comparison (training and evaluation): {p.get('wall_time_s', float('nan')) / 60:.1f} min",
         *([f"- note: {p['note']}"] if p.get("note") else []),
+        *(
+            [
+                f"- learned margin: `{m['npz']}` (sha256 {m['npz_sha256'][:12]}, copied from `{m['source']}`), the "
+                "weights these policies were trained with; `compare --bundled` measures the margin with them"
+            ]
+            if (m := card.get("learned_margin_weights"))
+            else []
+        ),
         "",
         f"Evaluation: {s['eval_episodes']} deterministic episodes from seed {s['eval_seed']}, command "
         f"{s['forward_velocity']:g} m/s, accelerations after {s['warmup_s']:g} s; mean ± std over training seeds.",

@@ -16,11 +16,15 @@ measured for the baseline too. Outputs in ``<out>``:
   evaluation episodes) of velocity tracking error, base linear and angular acceleration RMS, stance width,
   margin and falls, with every run's numbers in the JSON.
 
-``--bundle DIR`` then copies the runs' TorchScript actors and configs into a policy bundle with a card
-(:mod:`margin_rl.train.bundle`); ``--bundled NAME`` trains nothing and evaluates a bundle the same way, e.g. the
-shipped ANYmal B policies (the README's main job)::
+``--bundle DIR`` then copies the runs' TorchScript actors and configs, and the learned-margin weights they were
+trained with, into a policy bundle with a card (:mod:`margin_rl.train.bundle`); ``--bundled NAME`` trains nothing
+and evaluates a bundle the same way, with the bundle's margin weights, e.g. the shipped ANYmal B policies (the
+README's main job)::
 
     python -m margin_rl.train.compare --bundled anymal_b --out results/anymal_b
+
+With ``--bundled``, ``--env-option``/``--margin-weights`` change the evaluation environment (other terrain, the
+package's current margin weights, ...); the card's table then need not be reproduced.
 """
 
 from __future__ import annotations
@@ -126,16 +130,21 @@ def evaluate_variants(
     settings: CompareSettings,
     out: str | Path,
     env_options: dict[str, Any] | None = None,
+    eval_env_overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Evaluate every variant's policies on the same command and seeds; write compare.png/.md/.json into ``out``.
 
     ``variants``: name -> (margin weight, [(training seed, policy file), ...]). A policy inside a run directory
     is evaluated into ``<run>/eval``, any other (e.g. a bundled one) into ``<out>/eval/<variant>__s<seed>``.
+    ``env_options``: the options the runs were trained with (recorded); ``eval_env_overrides``: EnvConfig fields
+    changed for the evaluation only (a bundle's own learned-margin weights).
     """
     from margin_rl.train.runs import find_run_config
 
     out = Path(out)
     report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": dict(env_options or {})}
+    if eval_env_overrides:
+        report["eval_env_overrides"] = dict(eval_env_overrides)
     report["variants"] = {}
     examples: dict[str, Evaluation] = {}
     for name, (weight, policies) in variants.items():
@@ -146,6 +155,7 @@ def evaluate_variants(
             eval_dir = config.parent / "eval" if in_run else out / "eval" / f"{name.replace(' ', '_')}__s{seed}"
             metrics, evaluation = evaluate(
                 policy,
+                env_overrides=eval_env_overrides,
                 episodes=settings.eval_episodes,
                 seed=settings.eval_seed,
                 forward_velocity=settings.forward_velocity,
@@ -277,15 +287,25 @@ def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
     )
 
 
-def run_bundled(name: str, out: str | Path, eval_overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Evaluate a policy bundle (see :mod:`margin_rl.train.bundle`) like ``compare`` evaluates its runs."""
+def run_bundled(
+    name: str,
+    out: str | Path,
+    eval_overrides: dict[str, Any] | None = None,
+    env_overrides: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Evaluate a policy bundle (see :mod:`margin_rl.train.bundle`) like ``compare`` evaluates its runs.
+
+    ``eval_overrides``: CompareSettings evaluation fields replacing the card's; ``env_overrides``: EnvConfig
+    fields for the evaluation (e.g. rough terrain, or other learned-margin weights than the bundle's own).
+    """
     from margin_rl.train.bundle import load_bundle
 
     bundle = load_bundle(name)
     stored = dict(bundle.card["settings"])
     stored["seeds"] = tuple(stored["seeds"])
     settings = CompareSettings(**{**stored, **dict(eval_overrides or {})})
-    report = evaluate_variants(bundle.variants(), settings, out, bundle.card.get("env_options"))
+    overrides = {**bundle.env_overrides(), **dict(env_overrides or {})}
+    report = evaluate_variants(bundle.variants(), settings, out, bundle.card.get("env_options"), overrides)
     report["bundle"] = {"name": bundle.name, "path": str(bundle.path), "card_table": bundle.card["table"]}
     write_json(Path(out) / "compare.json", report)
     return report
@@ -324,7 +344,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.bundled is not None:
             out = args.out or Path("results") / f"bundled__{Path(args.bundled).name}"
-            report = run_bundled(args.bundled, out, _eval_overrides(args))
+            options = env_overrides(args)
+            options.pop("margin_weight", None)  # the bundle's variants fix their weights
+            report = run_bundled(args.bundled, out, _eval_overrides(args), options)
         else:
             settings = _settings_from_args(args)
             options = env_overrides(args)

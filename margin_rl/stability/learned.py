@@ -58,6 +58,20 @@ def bundled_robots() -> tuple[str, ...]:
     return tuple(sorted(p.stem for p in weights_dir().glob("*.npz")))
 
 
+def weights_path(robot_or_path: str | Path) -> Path:
+    """The ``.npz`` file meant by a robot name (bundled weights) or a path (its card is the ``.json`` beside it).
+
+    Raises:
+        WeightsError: a name that is not a bundled robot (lists the bundled ones).
+    """
+    text = str(robot_or_path)
+    if text.endswith(".npz") or "/" in text or Path(text).suffix:
+        return Path(text).with_suffix(".npz")
+    if text not in bundled_robots():
+        raise WeightsError(f"no learned margin for robot {text!r}; bundled: {', '.join(bundled_robots()) or 'none'}")
+    return weights_dir() / f"{text}.npz"
+
+
 def _softsign(z: np.ndarray) -> np.ndarray:
     return z / (1.0 + np.abs(z))
 
@@ -175,15 +189,7 @@ class LearnedMargin:
             WeightsError: unknown robot (lists the bundled ones), missing card, checksum mismatch
                 (corrupted file), other lambda layout or format.
         """
-        text = str(robot_or_path)
-        if text.endswith(".npz") or "/" in text or Path(text).suffix:
-            npz = Path(text).with_suffix(".npz")
-        else:
-            if text not in bundled_robots():
-                raise WeightsError(
-                    f"no learned margin for robot {text!r}; bundled: {', '.join(bundled_robots()) or 'none'}"
-                )
-            npz = weights_dir() / f"{text}.npz"
+        npz = weights_path(robot_or_path)
         card_path = npz.with_suffix(".json")
         if not npz.is_file():
             raise WeightsError(f"weights file not found: {npz}")

@@ -21,15 +21,17 @@ def test_anymal_b_bundle_is_shipped_with_both_variants_and_three_seeds() -> None
     assert bundle.card["provenance"]["commit"] not in ("", "unknown")
 
 
-def test_bundled_policies_were_trained_with_the_bundled_learned_margin() -> None:
-    """Retraining the bundled margin weights changes the reward these policies were trained on and the margin
-    they are evaluated with: retrain the policies too (README, compare --bundle) when this fails."""
+def test_bundle_carries_the_learned_margin_its_policies_were_trained_with() -> None:
+    """The policies' reward used these weights and the card's margin column is measured with them, so the
+    bundle stays reproducible when the package's own anymal_b weights are retrained."""
     from margin_rl.stability import LearnedMargin
 
-    for entry in load_bundle("anymal_b").card["policies"]:
-        identity = entry["learned_margin"]
-        assert identity is not None and identity["source"] == "anymal_b"
-        assert identity["sha256"] == LearnedMargin.load("anymal_b").card["sha256"]
+    bundle = load_bundle("anymal_b")  # also checks every policy's recorded weights against the carried copy
+    assert bundle.margin_weights is not None and bundle.margin_weights.is_file()
+    carried = LearnedMargin.load(bundle.margin_weights)
+    for entry in bundle.card["policies"]:
+        assert entry["learned_margin"]["sha256"] == carried.card["sha256"]
+    assert bundle.env_overrides() == {"margin_weights": str(bundle.margin_weights)}
 
 
 @pytest.mark.parametrize("variant", ["without margin", "with margin"])

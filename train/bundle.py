@@ -13,7 +13,8 @@ A bundle is a folder ``margin_rl/train/bundled/<name>/`` (or any folder given by
 policy is refused instead of silently evaluated. Carrying its own learned-margin weights keeps a bundle
 reproducible when the package's bundled margin weights are retrained: the policies' actions never depend on
 the margin (it is not a policy observation), but their reward did, and the card's margin column is measured
-with these weights.
+with these weights. (``evaluate`` on one bundled ``policy.pt`` uses the package's weights unless given
+``--margin-weights <bundle>/learned_margin/<robot>.npz``.)
 """
 
 from __future__ import annotations

@@ -126,9 +126,9 @@ def fit(
     """Adam + learning-rate schedule + early stopping; the model ends with its best validation weights.
 
     ``schedule="plateau"`` halves the rate after ``lr_patience`` epochs without validation improvement;
-    ``schedule="cosine"`` anneals it from ``lr`` to ``min_lr`` over all ``epochs`` (stepped per batch).
-    The plateau schedule leaves a slowly converging fit at a high rate for most of a short run, which is
-    why the cosine schedule reaches a lower loss in the same number of epochs (BENCHMARKS.md).
+    ``schedule="cosine"`` anneals it from ``lr`` to ``min_lr`` over all ``epochs`` (stepped per batch), for
+    large-batch runs with a fixed budget. On the full ANYmal datasets the plateau schedule with batch 256
+    generalised better than cosine with batch 1024 (BENCHMARKS.md, "Training recipe").
     """
     check_config(config)
     torch.manual_seed(config.seed)

@@ -280,10 +280,13 @@ class LearnedMargin:
         """True where some entry of lambda is outside the range seen in the training split.
 
         The network's error grows quickly outside the sampled ranges (seed 000 Fig. 3); contact flags
-        are binary and always in range.
+        are binary and always in range. The ranges are widened by 1e-6 of their width (at least 1e-7): they
+        were stored from float32 samples, so a bound reached exactly, like the unit z of a flat-ground
+        normal, reads 1 - 6e-8 and would otherwise flag every state on flat ground.
         """
         x = check_lambda(lam)
-        low, high = self.params.lam_low, self.params.lam_high
+        slack = np.maximum(1e-6 * (self.params.lam_high - self.params.lam_low), 1e-7)
+        low, high = self.params.lam_low - slack, self.params.lam_high + slack
         outside = (x < low) | (x > high)
         outside[..., _CONTACTS] = False
         result = outside.any(axis=-1)

@@ -88,6 +88,21 @@ def test_out_of_distribution_mask(model: LearnedMargin) -> None:
     assert model.out_of_distribution(lam[1]) is True
 
 
+@pytest.mark.parametrize("robot", ["anymal_b", "anymal_c"])
+def test_standing_on_flat_ground_is_in_distribution(robot: str) -> None:
+    """The standing state has flat-ground normals (0, 0, 1), exactly the top of the sampled range of their z."""
+    from margin_rl import load_robot
+    from margin_rl.stability.sampling import standing_state
+
+    lam = standing_state(load_robot(robot))
+    assert lam[LAMBDA_SLICES["normals"]][2::3].tolist() == [1.0] * 4
+    model = LearnedMargin.load(robot)
+    assert not model.out_of_distribution(lam)
+    lam_far = lam.copy()
+    lam_far[LAMBDA_SLICES["base_ang_acc"].start] = 50.0  # a trotting policy's base angular acceleration
+    assert model.out_of_distribution(lam_far)
+
+
 def test_save_load_round_trip_and_card(saved: Path, model: LearnedMargin) -> None:
     card = json.loads(saved.with_suffix(".json").read_text())
     assert card["architecture"] == list(ARCHITECTURE) and card["activation"] == "softsign"

@@ -97,10 +97,8 @@ def main() -> None:
                 f"{learned_mean:.3f} | {c['rmse_cm']:.2f} | {c['bias_cm']:+.2f} | {c['sign']:.1%} | {c['ood']:.1%} |"
             )
     model = next(iter(models.values()))
-    slack = np.maximum(1e-6 * (model.params.lam_high - model.params.lam_low), 1e-7)
     for variant, parts in states.items():
-        lam = np.concatenate(parts)
-        outside = ((lam < model.params.lam_low - slack) | (lam > model.params.lam_high + slack)).mean(axis=0)
+        outside = model.outside_ranges(np.concatenate(parts)).mean(axis=0)
         worst = sorted(zip(outside, lambda_names(), strict=True), reverse=True)[:8]
         print(f"{variant}: outside the ranges of the first weights: " + ", ".join(f"{n} {f:.0%}" for f, n in worst))
     print(f"total {time.perf_counter() - t0:.0f} s")

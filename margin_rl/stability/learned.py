@@ -14,7 +14,8 @@ pickle) and checks them against their model card (``weights/<robot>.json``: sha2
 * ``model.value_and_grad(lam)``: both in one pass;
 * ``model.torch_module()``: the same network as a ``torch.nn.Module`` for differentiable use;
 * ``model.export_onnx(path)``: ONNX for C++ users;
-* ``model.out_of_distribution(lam)``: True where lambda leaves the per-field ranges seen in training.
+* ``model.out_of_distribution(lam)``: True where lambda leaves the per-field ranges seen in training
+  (``model.outside_ranges(lam)``: which entries).
 """
 
 from __future__ import annotations
@@ -276,21 +277,24 @@ class LearnedMargin:
         """dm_l/dlambda [m per lambda unit]: (47,) or (N, 47)."""
         return self.value_and_grad(lam)[1]
 
-    def out_of_distribution(self, lam: np.ndarray) -> bool | np.ndarray:
-        """True where some entry of lambda is outside the range seen in the training split.
+    def outside_ranges(self, lam: np.ndarray) -> np.ndarray:
+        """Per entry: True where lambda (47,) or (N, 47) is outside the range seen in the training split.
 
-        The network's error grows quickly outside the sampled ranges (seed 000 Fig. 3); contact flags
-        are binary and always in range. The ranges are widened by 1e-6 of their width (at least 1e-7): they
-        were stored from float32 samples, so a bound reached exactly, like the unit z of a flat-ground
-        normal, reads 1 - 6e-8 and would otherwise flag every state on flat ground.
+        Contact flags are binary and always in range. The ranges are widened by 1e-6 of their width (at
+        least 1e-7): they were stored from float32 samples, so a bound reached exactly, like the unit z of a
+        flat-ground normal, reads 1 - 6e-8 and would otherwise flag every state on flat ground.
         """
         x = check_lambda(lam)
         slack = np.maximum(1e-6 * (self.params.lam_high - self.params.lam_low), 1e-7)
-        low, high = self.params.lam_low - slack, self.params.lam_high + slack
-        outside = (x < low) | (x > high)
+        outside = (x < self.params.lam_low - slack) | (x > self.params.lam_high + slack)
         outside[..., _CONTACTS] = False
-        result = outside.any(axis=-1)
-        return bool(result) if x.ndim == 1 else result
+        return outside
+
+    def out_of_distribution(self, lam: np.ndarray) -> bool | np.ndarray:
+        """True where some entry of lambda is outside the range seen in the training split
+        (:meth:`outside_ranges`); the network's error grows quickly there (seed 000 Fig. 3)."""
+        result = self.outside_ranges(lam).any(axis=-1)
+        return bool(result) if result.ndim == 0 else result
 
     # ------------------------------------------------------------------ torch and ONNX
     def torch_module(self, dtype: object = None):

@@ -101,6 +101,7 @@ def test_standing_on_flat_ground_is_in_distribution(robot: str) -> None:
     lam_far = lam.copy()
     lam_far[LAMBDA_SLICES["base_ang_acc"].start] = 50.0  # a trotting policy's base angular acceleration
     assert model.out_of_distribution(lam_far)
+    assert np.flatnonzero(model.outside_ranges(lam_far)).tolist() == [LAMBDA_SLICES["base_ang_acc"].start]
 
 
 def test_save_load_round_trip_and_card(saved: Path, model: LearnedMargin) -> None:

@@ -3,6 +3,9 @@
 Usage:
     python benchmarks/bench_margin_recipe.py --data data/anymal_c --max-samples 600000 \\
         --recipe '{"epochs": 15}' --recipe '{"epochs": 15, "schedule": "cosine", "batch_size": 1024, "lr": 4e-3}'
+    python benchmarks/bench_margin_recipe.py --data data/anymal_c --max-samples 600000 \\
+        --recipe '{"epochs": 15}' --recipe '{"epochs": 15, "mirror": "augment"}' \
+        --recipe '{"epochs": 15, "mirror": "tied"}'
 
 Each ``--recipe`` is a JSON object of :class:`margin_rl.stability.training.TrainConfig` fields on top of the
 defaults. Every recipe trains a fresh paper-size MLP on the same seeded split of the first ``--max-samples``
@@ -21,7 +24,7 @@ import numpy as np
 import torch
 
 from margin_rl.dataset import load_dataset
-from margin_rl.stability.training import TrainConfig, build_model, check_config, fit, split_indices
+from margin_rl.stability.training import TrainConfig, build_model, check_config, fit, split_indices, training_split
 
 
 def parse_recipe(text: str) -> TrainConfig:
@@ -48,10 +51,11 @@ def main() -> None:
     print(f"{args.data}: {len(lam):,} ok samples, {len(split.train):,} for training, {len(split.val):,} validation")
     print("| recipe | best val RMSE [cm] | best epoch | wall time [s] |\n|---|---|---|---|")
     for text, config in recipes:
-        model = build_model(lam[split.train], margin[split.train])
+        torch.manual_seed(config.seed)
+        model = build_model(lam[split.train], margin[split.train], config.mirror)
         t0 = time.perf_counter()
-        train, val = split.train, split.val
-        summary = fit(model, lam[train], margin[train], lam[val], margin[val], config, progress=False)
+        lam_fit, margin_fit = training_split(lam[split.train], margin[split.train], config)
+        summary = fit(model, lam_fit, margin_fit, lam[split.val], margin[split.val], config, progress=False)
         wall = time.perf_counter() - t0
         print(f"| `{text}` | {summary['best_val_rmse_cm']:.3f} | {summary['best_epoch']} | {wall:.0f} |", flush=True)
 

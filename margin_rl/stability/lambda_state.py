@@ -37,6 +37,10 @@ class LambdaField:
     frame: str  # "B" base, "H" horizontal, "-" frame-free
     unit: str
     description: str
+    # How the field transforms under the sagittal mirror (y -> -y): "polar" vectors flip their y
+    # component, "axial" vectors (angular quantities, torques) flip x and z, "even" entries keep their
+    # sign. Per-foot fields (leading dimension N_FEET) also swap left and right legs.
+    parity: str = "even"
 
     @property
     def size(self) -> int:
@@ -44,16 +48,16 @@ class LambdaField:
 
 
 LAMBDA_FIELDS: tuple[LambdaField, ...] = (
-    LambdaField("gravity_axis", (3,), "B", "-", "e_g: world up axis in the base frame (3rd row of R)"),
-    LambdaField("com_vel", (3,), "H", "m/s", "CoM linear velocity c_dot"),
-    LambdaField("com_acc", (3,), "H", "m/s^2", "CoM linear acceleration c_ddot"),
-    LambdaField("base_ang_acc", (3,), "H", "rad/s^2", "base angular acceleration w_dot"),
-    LambdaField("ext_force", (3,), "H", "N", "external force on the robot, applied at the CoM"),
-    LambdaField("ext_torque", (3,), "H", "N m", "external torque on the robot"),
-    LambdaField("feet", (N_FEET, 3), "H", "m", "foot-sphere centres relative to the CoM, LF RF LH RH"),
+    LambdaField("gravity_axis", (3,), "B", "-", "e_g: world up axis in the base frame (3rd row of R)", "polar"),
+    LambdaField("com_vel", (3,), "H", "m/s", "CoM linear velocity c_dot", "polar"),
+    LambdaField("com_acc", (3,), "H", "m/s^2", "CoM linear acceleration c_ddot", "polar"),
+    LambdaField("base_ang_acc", (3,), "H", "rad/s^2", "base angular acceleration w_dot", "axial"),
+    LambdaField("ext_force", (3,), "H", "N", "external force on the robot, applied at the CoM", "polar"),
+    LambdaField("ext_torque", (3,), "H", "N m", "external torque on the robot", "axial"),
+    LambdaField("feet", (N_FEET, 3), "H", "m", "foot-sphere centres relative to the CoM, LF RF LH RH", "polar"),
     LambdaField("mu", (1,), "-", "-", "terrain friction coefficient"),
     LambdaField("contacts", (N_FEET,), "-", "-", "contact flags c_i in {0, 1}"),
-    LambdaField("normals", (N_FEET, 3), "H", "-", "terrain normals at the feet (unit, out of the terrain)"),
+    LambdaField("normals", (N_FEET, 3), "H", "-", "terrain normals at the feet (unit, out of the terrain)", "polar"),
 )
 
 LAMBDA_DIM: int = sum(f.size for f in LAMBDA_FIELDS)
@@ -71,6 +75,49 @@ LAMBDA_SLICES: dict[str, slice] = _slices()
 """Slice of each field in the flat 47-vector."""
 
 _AXES = ("x", "y", "z")
+
+MIRROR_LEGS: tuple[int, ...] = (1, 0, 3, 2)
+"""Mirror partner of each leg (LF <-> RF, LH <-> RH) under the sagittal mirror y -> -y."""
+
+_FLIPPED_AXES = {"polar": (1,), "axial": (0, 2), "even": ()}
+
+
+def _mirror_map() -> tuple[np.ndarray, np.ndarray]:
+    """The sagittal mirror as a signed permutation of lambda: mirror(lam)[k] = sign[k] * lam[source[k]]."""
+    source, sign = np.arange(LAMBDA_DIM), np.ones(LAMBDA_DIM)
+    for f in LAMBDA_FIELDS:
+        start = LAMBDA_SLICES[f.name].start
+        per_foot = f.shape[0] == N_FEET
+        block = np.arange(f.size).reshape((N_FEET, -1) if per_foot else (1, -1))
+        if per_foot:
+            block = block[list(MIRROR_LEGS)]
+        source[start : start + f.size] = start + block.ravel()
+        flip = np.ones(block.shape[1])
+        if block.shape[1] == 3:
+            flip[list(_FLIPPED_AXES[f.parity])] = -1.0
+        elif f.parity != "even":
+            raise ValueError(f"lambda field {f.name!r}: parity {f.parity!r} needs 3 components")
+        sign[start : start + f.size] = np.tile(flip, block.shape[0])
+    return source, sign
+
+
+MIRROR_SOURCE, MIRROR_SIGN = _mirror_map()
+"""Index map and signs of :func:`mirror_lambda` (an involution: applying it twice is the identity)."""
+
+
+def mirror_lambda(lam: np.ndarray) -> np.ndarray:
+    """lambda of the sagittally mirrored state (reflection y -> -y of the world and the robot): (..., 47).
+
+    Polar vectors (e_g, CoM velocity and acceleration, external force, feet, normals) flip their y
+    component, axial vectors (base angular acceleration, external torque) flip x and z, and the per-foot
+    fields swap left and right legs (LF <-> RF, LH <-> RH). For a robot whose model is symmetric about
+    its sagittal plane (ANYmal B and C) the stability margin is invariant: m(mirror(lam)) = m(lam).
+    Returns a new array; the input is not modified.
+    """
+    arr = np.asarray(lam, dtype=float)
+    if arr.ndim == 0 or arr.shape[-1] != LAMBDA_DIM:
+        raise ValueError(f"lambda must have last dimension {LAMBDA_DIM}, got shape {arr.shape}")
+    return arr[..., MIRROR_SOURCE] * MIRROR_SIGN
 
 
 def lambda_names() -> tuple[str, ...]:

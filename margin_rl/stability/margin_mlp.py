@@ -1,19 +1,55 @@
-"""The margin MLP as a torch module (training and differentiable use); numpy inference is in ``learned``."""
+"""The margin MLP as a torch module (training and differentiable use); numpy inference is in ``learned``.
+
+Two parameterisations of the same 47-256-128-128-1 softsign network:
+
+* plain: every weight free (the paper's network);
+* ``mirror_tied``: the weights are tied so that the network is *exactly* invariant under the sagittal
+  mirror of lambda (:func:`~margin_rl.stability.lambda_state.mirror_lambda`), a symmetry of the analytic
+  margin of a left-right symmetric robot. The hidden units come in mirror pairs (first half, second
+  half of each layer) and, with Q the mirror as a signed permutation of the normalised input and
+  S the swap of the two halves of a hidden layer,
+
+      layer 1:      W_1 = [U; U Q],          b_1 = [c; c]        so  W_1 Q x + b_1 = S (W_1 x + b_1)
+      layers 2, 3:  W_k = [[A, B], [B, A]],  b_k = [d; d]        so  W_k S h + b_k = S (W_k h + b_k)
+      output:       w   = [v, v]                                 so  w S h = w h
+
+  Softsign is elementwise and commutes with S, hence m(Q x) = m(x). Q x = mirror(x) in normalised
+  coordinates needs a mirror-symmetric normalisation (mean with M mu = mu, equal scales on swapped
+  entries), which :func:`~margin_rl.stability.training.build_model` fits on the mirror-augmented
+  training split. ``to_weights`` expands the tied parameters into ordinary dense matrices, so saved
+  weights, the numpy inference, the ONNX export and :meth:`from_weights` are the same for both.
+"""
 
 from __future__ import annotations
+
+import itertools
+import math
 
 import numpy as np
 import torch
 from torch import nn
+from torch.nn import functional
 
+from margin_rl.stability.lambda_state import MIRROR_SIGN, MIRROR_SOURCE
 from margin_rl.stability.learned import ARCHITECTURE, MarginWeights
+
+
+def _uniform(shape: tuple[int, ...], fan_in: int) -> nn.Parameter:
+    """nn.Linear's default initialisation range, U(-1/sqrt(fan_in), 1/sqrt(fan_in)), from torch's global seed."""
+    bound = 1.0 / math.sqrt(fan_in)
+    return nn.Parameter(torch.empty(shape).uniform_(-bound, bound))
 
 
 class MarginMLP(nn.Module):
     """47-256-128-128-1 softsign MLP on raw lambda, with input and output scaling as buffers.
 
     ``forward(lam)``: (..., 47) -> (...) margin [m]. Gradients flow to lambda (for optimisation) and to
-    the parameters (for training); the normalisation buffers are fixed.
+    the parameters (for training); the normalisation buffers are fixed. ``mirror_tied=True`` ties the
+    weights so that the network is exactly mirror-invariant (module docstring).
+
+    Raises:
+        ValueError: ``mirror_tied`` with a normalisation that is not mirror-symmetric (then the tied
+            network would not be invariant in lambda); fit it on mirror-augmented data.
     """
 
     def __init__(
@@ -25,11 +61,36 @@ class MarginMLP(nn.Module):
         lam_low: np.ndarray,
         lam_high: np.ndarray,
         dtype: torch.dtype = torch.float32,
+        mirror_tied: bool = False,
     ) -> None:
         super().__init__()
         widths = ARCHITECTURE
-        self.layers = nn.ModuleList(nn.Linear(widths[i], widths[i + 1]) for i in range(len(widths) - 1))
+        self.mirror_tied = bool(mirror_tied)
         self.activation = nn.Softsign()
+        if self.mirror_tied:
+            _check_mirror_symmetric(np.asarray(input_mean, float), np.asarray(input_std, float))
+            halves = [w // 2 for w in widths[1:-1]]
+            if any(2 * h != w for h, w in zip(halves, widths[1:-1], strict=True)):
+                raise ValueError(f"mirror_tied needs even hidden widths, got {widths[1:-1]}")
+            self.layers = nn.ModuleList()
+            self.first = nn.ParameterDict(
+                {"U": _uniform((halves[0], widths[0]), widths[0]), "c": _uniform((halves[0],), widths[0])}
+            )
+            self.hidden = nn.ModuleList(
+                nn.ParameterDict(
+                    {
+                        "AB": _uniform((h_out, 2 * h_in), 2 * h_in),  # [A | B]
+                        "d": _uniform((h_out,), 2 * h_in),
+                    }
+                )
+                for h_in, h_out in itertools.pairwise(halves)
+            )
+            fan_in = 2 * halves[-1]
+            self.last = nn.ParameterDict({"v": _uniform((1, halves[-1]), fan_in), "e": _uniform((1,), fan_in)})
+            self.register_buffer("mirror_source", torch.as_tensor(MIRROR_SOURCE, dtype=torch.long))
+            self.register_buffer("mirror_sign", torch.as_tensor(MIRROR_SIGN, dtype=dtype))
+        else:
+            self.layers = nn.ModuleList(nn.Linear(widths[i], widths[i + 1]) for i in range(len(widths) - 1))
         self.register_buffer("input_mean", torch.as_tensor(input_mean, dtype=dtype))
         self.register_buffer("input_std", torch.as_tensor(input_std, dtype=dtype))
         self.register_buffer("output_scale", torch.tensor([output_mean, output_std], dtype=dtype))
@@ -37,12 +98,32 @@ class MarginMLP(nn.Module):
         self.register_buffer("lam_high", torch.as_tensor(lam_high, dtype=dtype))
         self.to(dtype)
 
+    def dense_parameters(self) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """(W_k, b_k) of every layer as dense tensors (differentiable in the tied parameters)."""
+        if not self.mirror_tied:
+            return [(layer.weight, layer.bias) for layer in self.layers]
+        U, c = self.first["U"], self.first["c"]
+        # Q is a signed permutation, (Q x)[k] = sign[k] x[source[k]], with source an involution and equal
+        # signs on swapped entries, so the columns of U Q are (U Q)[:, j] = sign[j] U[:, source[j]].
+        mirrored = U[:, self.mirror_source] * self.mirror_sign
+        out = [(torch.cat([U, mirrored]), torch.cat([c, c]))]
+        for block in self.hidden:
+            top, d = block["AB"], block["d"]
+            half = top.shape[1] // 2
+            bottom = torch.cat([top[:, half:], top[:, :half]], dim=1)  # [A | B] -> [B | A]
+            out.append((torch.cat([top, bottom]), torch.cat([d, d])))
+        v, e = self.last["v"], self.last["e"]
+        out.append((torch.cat([v, v], dim=1), e))
+        return out
+
     def normalized_forward(self, x: torch.Tensor) -> torch.Tensor:
         """Network output in normalised units (what the training loss sees)."""
+        params = self.dense_parameters()
         h = x
-        for layer in self.layers[:-1]:
-            h = self.activation(layer(h))
-        return self.layers[-1](h)[..., 0]
+        for weight, bias in params[:-1]:
+            h = self.activation(functional.linear(h, weight, bias))
+        weight, bias = params[-1]
+        return functional.linear(h, weight, bias)[..., 0]
 
     def forward(self, lam: torch.Tensor) -> torch.Tensor:
         x = (lam - self.input_mean) / self.input_std
@@ -50,7 +131,7 @@ class MarginMLP(nn.Module):
 
     @classmethod
     def from_weights(cls, weights: MarginWeights, dtype: torch.dtype | None = None) -> MarginMLP:
-        """Module with the given parameters, in ``dtype`` (float32 by default)."""
+        """Plain module with the given (dense) parameters, in ``dtype`` (float32 by default)."""
         module = cls(
             weights.input_mean,
             weights.input_std,
@@ -67,18 +148,34 @@ class MarginMLP(nn.Module):
         return module
 
     def to_weights(self) -> MarginWeights:
-        """Plain-numpy parameters for saving (see :func:`margin_rl.stability.learned.save_weights`)."""
+        """Plain-numpy dense parameters for saving (see :func:`margin_rl.stability.learned.save_weights`)."""
 
         def numpy(t: torch.Tensor) -> np.ndarray:
             return t.detach().cpu().double().numpy()
 
+        params = self.dense_parameters()
         return MarginWeights(
-            weights=tuple(numpy(layer.weight) for layer in self.layers),
-            biases=tuple(numpy(layer.bias) for layer in self.layers),
+            weights=tuple(numpy(w) for w, _ in params),
+            biases=tuple(numpy(b) for _, b in params),
             input_mean=numpy(self.input_mean),
             input_std=numpy(self.input_std),
             output_mean=float(self.output_scale[0]),
             output_std=float(self.output_scale[1]),
             lam_low=numpy(self.lam_low),
             lam_high=numpy(self.lam_high),
+        )
+
+
+def _check_mirror_symmetric(mean: np.ndarray, std: np.ndarray, rtol: float = 1e-6) -> None:
+    """Refuse an input normalisation that does not commute with the mirror (names the first bad entry)."""
+    from margin_rl.stability.lambda_state import lambda_names
+
+    scale = np.maximum(np.abs(mean).max(), 1.0)
+    bad_mean = np.abs(mean[MIRROR_SOURCE] * MIRROR_SIGN - mean) > rtol * scale
+    bad_std = np.abs(std[MIRROR_SOURCE] - std) > rtol * np.maximum(std, 1e-12)
+    bad = np.nonzero(bad_mean | bad_std)[0]
+    if bad.size:
+        raise ValueError(
+            f"mirror_tied needs a mirror-symmetric input normalisation; {lambda_names()[bad[0]]} and its mirror "
+            "entry differ: fit the normalisation on mirror-augmented data (training.build_model(..., mirror=True))"
         )

@@ -6,6 +6,9 @@ Command line::
         [--epochs 200 --batch-size 1024 --lr 1e-3 --patience 10 --seed 0 --logdir runs/margin]
 
 Only samples whose analytic status is ``ok`` are used (the dataset loader counts and drops the rest).
+``--mirror tied`` trains the same-size network with weights tied so that it is exactly invariant under
+the left-right mirror of lambda, a symmetry of the analytic margin (``--mirror augment`` adds mirrored
+copies of the training samples instead).
 The split is seeded (train / validation / test); the input normalisation and the output scaling are
 fitted on the training split and stored with the weights. Adam on the mean squared error of the
 normalised margin, learning rate halved on validation plateaus, early stopping on the validation
@@ -34,7 +37,7 @@ from margin_rl.dataset import Dataset, load_dataset
 from margin_rl.provenance import git_commit
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
-from margin_rl.stability.lambda_state import LAMBDA_SLICES, lambda_names
+from margin_rl.stability.lambda_state import LAMBDA_SLICES, lambda_names, mirror_lambda
 from margin_rl.stability.learned import LearnedMargin, save_weights
 from margin_rl.stability.margin_mlp import MarginMLP
 
@@ -58,15 +61,23 @@ class TrainConfig:
     seed: int = 0
     max_samples: int | None = None
     grad_check_states: int = 200
+    # Left-right symmetry (the analytic margin of ANYmal B and C is invariant under mirror_lambda):
+    # "none" trains the plain network on the data as it is; "augment" adds the mirror image of every
+    # training sample (twice the data, the plain network); "tied" trains a network whose weights are tied
+    # so that it is exactly mirror-invariant (margin_mlp module docstring; same size and saved format).
+    mirror: str = "none"
 
 
 SCHEDULES = ("plateau", "cosine")
+MIRROR_MODES = ("none", "augment", "tied")
 
 
 def check_config(config: TrainConfig) -> TrainConfig:
     """Refuse hyperparameters that cannot train, naming the field."""
     if config.schedule not in SCHEDULES:
         raise ValueError(f"TrainConfig.schedule must be one of {SCHEDULES}, got {config.schedule!r}")
+    if config.mirror not in MIRROR_MODES:
+        raise ValueError(f"TrainConfig.mirror must be one of {MIRROR_MODES}, got {config.mirror!r}")
     for name in ("epochs", "batch_size"):
         if getattr(config, name) < 1:
             raise ValueError(f"TrainConfig.{name} must be >= 1, got {getattr(config, name)}")
@@ -90,8 +101,30 @@ def split_indices(n: int, config: TrainConfig) -> Split:
     return Split(train=perm[n_test + n_val :], val=perm[n_test : n_test + n_val], test=perm[:n_test])
 
 
-def build_model(lam_train: np.ndarray, margin_train: np.ndarray) -> MarginMLP:
-    """A fresh MLP whose normalisation is fitted on the training split."""
+def with_mirror_images(lam: np.ndarray, margin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(2N, 47), (2N,): the samples followed by their mirror images (same labels; new arrays)."""
+    return np.concatenate([lam, mirror_lambda(lam)]), np.concatenate([margin, margin])
+
+
+def training_split(lam_train: np.ndarray, margin_train: np.ndarray, config: TrainConfig) -> tuple[np.ndarray, ...]:
+    """The samples the optimiser sees: with their mirror images for ``mirror="augment"``, else as given.
+
+    A tied network gives a sample and its mirror image the same loss, so ``"tied"`` needs no copies.
+    """
+    if config.mirror == "augment":
+        return with_mirror_images(lam_train, margin_train)
+    return lam_train, margin_train
+
+
+def build_model(lam_train: np.ndarray, margin_train: np.ndarray, mirror: str = "none") -> MarginMLP:
+    """A fresh MLP whose normalisation is fitted on the training split.
+
+    With ``mirror`` "augment" or "tied" the normalisation and the recorded input ranges are those of the
+    split together with its mirror images, so they are mirror-symmetric (needed by the tied network, and
+    the ranges then cover the mirrored states the network was trained for).
+    """
+    if mirror != "none":
+        lam_train, margin_train = with_mirror_images(lam_train, margin_train)
     std = lam_train.std(axis=0)
     return MarginMLP(
         input_mean=lam_train.mean(axis=0),
@@ -100,6 +133,7 @@ def build_model(lam_train: np.ndarray, margin_train: np.ndarray) -> MarginMLP:
         output_std=float(margin_train.std()),
         lam_low=lam_train.min(axis=0),
         lam_high=lam_train.max(axis=0),
+        mirror_tied=mirror == "tied",
     )
 
 
@@ -292,10 +326,10 @@ def train(
     ds: Dataset = load_dataset(data, max_samples=config.max_samples)
     lam, margin = ds.lam.astype(np.float64), ds.margin.astype(np.float64)
     split = split_indices(len(lam), config)
-    model = build_model(lam[split.train], margin[split.train])
-    summary = fit(
-        model, lam[split.train], margin[split.train], lam[split.val], margin[split.val], config, logdir, progress
-    )
+    torch.manual_seed(config.seed)  # the initial weights
+    model = build_model(lam[split.train], margin[split.train], config.mirror)
+    lam_fit, margin_fit = training_split(lam[split.train], margin[split.train], config)
+    summary = fit(model, lam_fit, margin_fit, lam[split.val], margin[split.val], config, logdir, progress)
     weights = model.to_weights()
     learned = LearnedMargin(weights)
     metrics = test_metrics(learned, lam[split.test], margin[split.test])
@@ -315,7 +349,8 @@ def train(
         grad = gradient_check(learned, robot, lam[pick], settings)
     card = {
         "robot": robot,
-        "description": "learned stability margin m_l(lambda) [m] of seed 000 §IV (47-256-128-128-1, softsign)",
+        "description": "learned stability margin m_l(lambda) [m] of seed 000 §IV (47-256-128-128-1, softsign)"
+        + ("; weights tied to be exactly invariant under the left-right mirror" if config.mirror == "tied" else ""),
         "dataset": {
             "path": str(data),
             "samples_total": int(sum(ds.counts.values())),
@@ -351,6 +386,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--patience", type=int, default=defaults.patience)
     parser.add_argument("--schedule", choices=SCHEDULES, default=defaults.schedule, help="learning-rate schedule")
     parser.add_argument("--min-lr", type=float, default=defaults.min_lr, help="final rate of the cosine schedule")
+    parser.add_argument(
+        "--mirror",
+        choices=MIRROR_MODES,
+        default=defaults.mirror,
+        help="left-right symmetry: none; augment (add mirrored copies); tied (exactly mirror-invariant network)",
+    )
     parser.add_argument("--seed", type=int, default=defaults.seed)
     parser.add_argument("--max-samples", type=int, default=None)
     parser.add_argument("--grad-check-states", type=int, default=defaults.grad_check_states)
@@ -370,6 +411,7 @@ def main(argv: list[str] | None = None) -> int:
         seed=args.seed,
         max_samples=args.max_samples,
         grad_check_states=args.grad_check_states,
+        mirror=args.mirror,
     )
     command = "python -m margin_rl.stability.training " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     card = train(args.data, args.out, config, args.logdir, command, progress=not args.quiet)

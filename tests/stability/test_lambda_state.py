@@ -18,6 +18,7 @@ from margin_rl.stability.lambda_state import (
     from_lambda,
     gravity_axis_from_roll_pitch,
     lambda_names,
+    mirror_lambda,
 )
 
 
@@ -110,3 +111,65 @@ def test_base_rotation_of_one_axis_matches_the_batch_bit_for_bit() -> None:
     batch = base_rotation_from_gravity_axis(e)
     for axis, R in zip(e, batch, strict=True):
         np.testing.assert_array_equal(base_rotation_from_gravity_axis(axis), R)
+
+
+def test_mirror_flips_polar_y_axial_xz_and_swaps_left_right_legs() -> None:
+    """A hand-built state and its mirror image, field by field."""
+    feet = np.arange(12.0).reshape(4, 3) + 1
+    normals = np.arange(12.0).reshape(4, 3) + 20
+    state = StabilityState(
+        gravity_axis=np.array([0.1, 0.2, 0.97]),
+        com_vel=np.array([1.0, 2.0, 3.0]),
+        com_acc=np.array([4.0, 5.0, 6.0]),
+        base_ang_acc=np.array([7.0, 8.0, 9.0]),
+        ext_force=np.array([10.0, 11.0, 12.0]),
+        ext_torque=np.array([13.0, 14.0, 15.0]),
+        feet=feet,
+        mu=np.array(0.6),
+        contacts=np.array([1.0, 0.0, 0.0, 1.0]),
+        normals=normals,
+    )
+    lam = state.to_lambda()
+    before = lam.copy()
+    m = from_lambda(mirror_lambda(lam))
+    np.testing.assert_array_equal(lam, before)  # input untouched
+    np.testing.assert_array_equal(m.gravity_axis, [0.1, -0.2, 0.97])
+    np.testing.assert_array_equal(m.com_vel, [1.0, -2.0, 3.0])
+    np.testing.assert_array_equal(m.com_acc, [4.0, -5.0, 6.0])
+    np.testing.assert_array_equal(m.ext_force, [10.0, -11.0, 12.0])
+    np.testing.assert_array_equal(m.base_ang_acc, [-7.0, 8.0, -9.0])  # axial: x and z flip
+    np.testing.assert_array_equal(m.ext_torque, [-13.0, 14.0, -15.0])
+    swap = [1, 0, 3, 2]  # LF <-> RF, LH <-> RH
+    np.testing.assert_array_equal(m.feet, feet[swap] * [1, -1, 1])
+    np.testing.assert_array_equal(m.normals, normals[swap] * [1, -1, 1])
+    np.testing.assert_array_equal(m.contacts, [0.0, 1.0, 1.0, 0.0])
+    assert float(m.mu) == 0.6
+
+
+def test_mirror_of_a_torque_is_the_torque_of_the_mirrored_force() -> None:
+    """Axial parity checked against physics: tau = r x f transforms like the mirror says."""
+    rng = np.random.default_rng(3)
+    r, f = rng.normal(size=3), rng.normal(size=3)
+    flip = np.diag([1.0, -1.0, 1.0])
+    torque = np.cross(r, f)
+    lam = StabilityState(
+        gravity_axis=np.array([0.0, 0.0, 1.0]), com_vel=np.zeros(3), com_acc=np.zeros(3), base_ang_acc=np.zeros(3),
+        ext_force=f, ext_torque=torque, feet=np.zeros((4, 3)), mu=np.array(0.5), contacts=np.ones(4),
+        normals=np.tile([0.0, 0.0, 1.0], (4, 1)),
+    ).to_lambda()  # fmt: skip
+    mirrored = from_lambda(mirror_lambda(lam))
+    np.testing.assert_allclose(mirrored.ext_torque, np.cross(flip @ r, flip @ f), atol=1e-12)
+    np.testing.assert_allclose(mirrored.ext_force, flip @ f)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 5))
+def test_mirror_is_an_involution_on_batches(seed: int, n: int) -> None:
+    lam = np.random.default_rng(seed).normal(size=(n, LAMBDA_DIM))
+    np.testing.assert_array_equal(mirror_lambda(mirror_lambda(lam)), lam)
+    np.testing.assert_array_equal(mirror_lambda(lam[0]), mirror_lambda(lam)[0])
+
+
+def test_mirror_refuses_a_wrong_shape() -> None:
+    with pytest.raises(ValueError, match="last dimension 47"):
+        mirror_lambda(np.zeros(46))

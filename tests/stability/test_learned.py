@@ -231,10 +231,72 @@ def test_fit_learns_a_smooth_function_and_anneals_the_rate(schedule: str) -> Non
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [("schedule", "linear", "schedule must be one of"), ("batch_size", 0, "batch_size must be >= 1"),
-     ("min_lr", 1.0, "min_lr <= lr")],
+     ("min_lr", 1.0, "min_lr <= lr"), ("mirror", "both", "mirror must be one of")],
 )  # fmt: skip
 def test_bad_training_config_is_refused_naming_the_field(field: str, value: object, message: str) -> None:
     from margin_rl.stability.training import TrainConfig, check_config
 
     with pytest.raises(ValueError, match=message):
         check_config(TrainConfig(**{field: value}))
+
+
+def test_mirror_tied_network_is_exactly_invariant_in_torch_numpy_and_gradients() -> None:
+    """The tied parameterisation: m(mirror(lam)) = m(lam) for random parameters, in the torch module and in
+    the dense numpy weights it exports; the gradient transforms like lambda (dm/dlam(M lam) = M dm/dlam(lam))."""
+    from margin_rl.stability.lambda_state import MIRROR_SIGN, MIRROR_SOURCE, mirror_lambda
+    from margin_rl.stability.training import build_model
+
+    rng = np.random.default_rng(5)
+    lam = rng.normal(size=(400, 47))
+    torch.manual_seed(1)
+    module = build_model(lam, rng.normal(size=400), mirror="tied")
+    x = torch.as_tensor(lam[:50], dtype=torch.float64)
+    module = module.double()
+    out, out_mirrored = module(x), module(torch.as_tensor(mirror_lambda(lam[:50])))
+    assert float(out.std()) > 0
+    torch.testing.assert_close(out, out_mirrored, rtol=0, atol=1e-12)
+    dense = LearnedMargin(module.to_weights())  # float32 weights, as saved: invariant to float32 rounding
+    np.testing.assert_allclose(dense(lam[:50]), dense(mirror_lambda(lam[:50])), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(dense(lam[:50]), out.detach().numpy(), rtol=0, atol=1e-6)
+    grad, grad_mirrored = dense.grad(lam[:50]), dense.grad(mirror_lambda(lam[:50]))
+    scale = np.abs(grad).max()
+    np.testing.assert_allclose(grad_mirrored, grad[:, MIRROR_SOURCE] * MIRROR_SIGN, rtol=0, atol=1e-5 * scale)
+    # the dense weights keep the paper's architecture
+    assert [w.shape[0] for w in dense.params.weights] == list(ARCHITECTURE[1:])
+
+
+def test_mirror_tied_network_refuses_an_asymmetric_normalisation() -> None:
+    rng = np.random.default_rng(0)
+    lam = rng.normal(size=(200, 47)) + 0.3  # mean not mirror-symmetric
+    with pytest.raises(ValueError, match="mirror-symmetric input normalisation"):
+        MarginMLP(lam.mean(0), lam.std(0), 0.0, 1.0, lam.min(0), lam.max(0), mirror_tied=True)
+
+
+@pytest.mark.parametrize("mirror", ["augment", "tied"])
+def test_mirror_training_learns_a_symmetric_target(mirror: str) -> None:
+    """A mirror-invariant target: both modes fit it, and the tied one is invariant by construction."""
+    from margin_rl.stability.lambda_state import LAMBDA_SLICES, mirror_lambda
+    from margin_rl.stability.training import TrainConfig, build_model, fit, training_split
+
+    rng = np.random.default_rng(0)
+    lam = rng.normal(size=(3000, 47))
+    feet = lam[:, LAMBDA_SLICES["feet"]].reshape(-1, 4, 3)
+    margin = 0.1 * np.tanh(feet[:, 0, 1] - feet[:, 1, 1]) ** 2 + 0.02 * lam[:, LAMBDA_SLICES["com_vel"]][:, 0]
+    np.testing.assert_allclose(  # the target is invariant
+        0.1 * np.tanh(mirror_lambda(lam)[:, LAMBDA_SLICES["feet"]].reshape(-1, 4, 3)[:, 0, 1]
+                      - mirror_lambda(lam)[:, LAMBDA_SLICES["feet"]].reshape(-1, 4, 3)[:, 1, 1]) ** 2
+        + 0.02 * lam[:, LAMBDA_SLICES["com_vel"]][:, 0],
+        margin,
+    )  # fmt: skip
+    config = TrainConfig(epochs=6, batch_size=128, lr=3e-3, grad_check_states=0, mirror=mirror)
+    model = build_model(lam[:2500], margin[:2500], mirror)
+    lam_fit, margin_fit = training_split(lam[:2500], margin[:2500], config)
+    assert len(lam_fit) == (5000 if mirror == "augment" else 2500)
+    summary = fit(model, lam_fit, margin_fit, lam[2500:], margin[2500:], config, progress=False)
+    assert summary["best_val_rmse_cm"] < 0.5 * 100 * margin.std()
+    learned = LearnedMargin(model.to_weights())
+    asymmetry = learned(lam[2500:]) - learned(mirror_lambda(lam[2500:]))
+    if mirror == "tied":
+        assert np.abs(asymmetry).max() < 1e-6
+    else:  # approximately invariant, learned from the mirrored copies
+        assert np.sqrt(np.mean(asymmetry**2)) < 0.25 * margin.std()

@@ -289,6 +289,7 @@ def test_mirror_training_learns_a_symmetric_target(mirror: str) -> None:
         margin,
     )  # fmt: skip
     config = TrainConfig(epochs=6, batch_size=128, lr=3e-3, grad_check_states=0, mirror=mirror)
+    torch.manual_seed(0)  # initial weights
     model = build_model(lam[:2500], margin[:2500], mirror)
     lam_fit, margin_fit = training_split(lam[:2500], margin[:2500], config)
     assert len(lam_fit) == (5000 if mirror == "augment" else 2500)
@@ -298,5 +299,12 @@ def test_mirror_training_learns_a_symmetric_target(mirror: str) -> None:
     asymmetry = learned(lam[2500:]) - learned(mirror_lambda(lam[2500:]))
     if mirror == "tied":
         assert np.abs(asymmetry).max() < 1e-6
-    else:  # approximately invariant, learned from the mirrored copies
-        assert np.sqrt(np.mean(asymmetry**2)) < 0.25 * margin.std()
+    else:  # approximately invariant: more so than the same network trained without the mirrored copies
+        plain_config = TrainConfig(epochs=6, batch_size=128, lr=3e-3, grad_check_states=0)
+        torch.manual_seed(0)
+        plain = build_model(lam[:2500], margin[:2500])
+        fit(plain, lam[:2500], margin[:2500], lam[2500:], margin[2500:], plain_config, progress=False)
+        plain_learned = LearnedMargin(plain.to_weights())
+        plain_asymmetry = plain_learned(lam[2500:]) - plain_learned(mirror_lambda(lam[2500:]))
+        ratio = np.sqrt(np.mean(asymmetry**2)) / np.sqrt(np.mean(plain_asymmetry**2))
+        assert ratio < 0.8

@@ -4,7 +4,7 @@ Usage:
     python benchmarks/bench_margin_recipe.py --data data/anymal_c --max-samples 600000 \\
         --recipe '{"epochs": 15}' --recipe '{"epochs": 15, "schedule": "cosine", "batch_size": 1024, "lr": 4e-3}'
     python benchmarks/bench_margin_recipe.py --data data/anymal_c --max-samples 600000 \\
-        --recipe '{"epochs": 15}' --recipe '{"epochs": 15, "mirror": "augment"}' \
+        --recipe '{"epochs": 15}' --recipe '{"epochs": 15, "mirror": "augment"}' \\
         --recipe '{"epochs": 15, "mirror": "tied"}'
 
 Each ``--recipe`` is a JSON object of :class:`margin_rl.stability.training.TrainConfig` fields on top of the

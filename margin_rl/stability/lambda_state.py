@@ -105,6 +105,14 @@ MIRROR_SOURCE, MIRROR_SIGN = _mirror_map()
 """Index map and signs of :func:`mirror_lambda` (an involution: applying it twice is the identity)."""
 
 
+def _lambda_array(lam: np.ndarray) -> np.ndarray:
+    """``lam`` as a float array of shape (..., 47); shape only (NaN is :func:`check_lambda`'s business)."""
+    arr = np.asarray(lam, dtype=float)
+    if arr.ndim == 0 or arr.shape[-1] != LAMBDA_DIM:
+        raise ValueError(f"lambda must have last dimension {LAMBDA_DIM}, got shape {arr.shape}")
+    return arr
+
+
 def mirror_lambda(lam: np.ndarray) -> np.ndarray:
     """lambda of the sagittally mirrored state (reflection y -> -y of the world and the robot): (..., 47).
 
@@ -114,10 +122,7 @@ def mirror_lambda(lam: np.ndarray) -> np.ndarray:
     its sagittal plane (ANYmal B and C) the stability margin is invariant: m(mirror(lam)) = m(lam).
     Returns a new array; the input is not modified.
     """
-    arr = np.asarray(lam, dtype=float)
-    if arr.ndim == 0 or arr.shape[-1] != LAMBDA_DIM:
-        raise ValueError(f"lambda must have last dimension {LAMBDA_DIM}, got shape {arr.shape}")
-    return arr[..., MIRROR_SOURCE] * MIRROR_SIGN
+    return _lambda_array(lam)[..., MIRROR_SOURCE] * MIRROR_SIGN
 
 
 def lambda_names() -> tuple[str, ...]:
@@ -190,9 +195,7 @@ def check_lambda(lam: np.ndarray, name: str = "lam") -> np.ndarray:
 
 def from_lambda(lam: np.ndarray) -> StabilityState:
     """Split (..., 47) into a :class:`StabilityState` (views, no copies)."""
-    arr = np.asarray(lam, dtype=float)
-    if arr.ndim == 0 or arr.shape[-1] != LAMBDA_DIM:
-        raise ValueError(f"lambda must have last dimension {LAMBDA_DIM}, got shape {arr.shape}")
+    arr = _lambda_array(lam)
     batch = arr.shape[:-1]
     values = {}
     for f in LAMBDA_FIELDS:

@@ -30,7 +30,7 @@ import torch
 from torch import nn
 from torch.nn import functional
 
-from margin_rl.stability.lambda_state import MIRROR_SIGN, MIRROR_SOURCE
+from margin_rl.stability.lambda_state import MIRROR_SIGN, MIRROR_SOURCE, lambda_names
 from margin_rl.stability.learned import ARCHITECTURE, MarginWeights
 
 
@@ -168,8 +168,6 @@ class MarginMLP(nn.Module):
 
 def _check_mirror_symmetric(mean: np.ndarray, std: np.ndarray, rtol: float = 1e-6) -> None:
     """Refuse an input normalisation that does not commute with the mirror (names the first bad entry)."""
-    from margin_rl.stability.lambda_state import lambda_names
-
     scale = np.maximum(np.abs(mean).max(), 1.0)
     bad_mean = np.abs(mean[MIRROR_SOURCE] * MIRROR_SIGN - mean) > rtol * scale
     bad_std = np.abs(std[MIRROR_SOURCE] - std) > rtol * np.maximum(std, 1e-12)

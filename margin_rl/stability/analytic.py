@@ -42,7 +42,7 @@ import multiprocessing
 import os
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -89,6 +89,20 @@ class AnalyticSettings:
 
     com_iterations: int = 10  # fixed-point iterations for the CoM offset
     com_tol: float = 3e-5  # [m], residual of the CoM fixed point (joint-angle error ~3e-5 rad)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, object]) -> AnalyticSettings:
+        """The inverse of :meth:`as_dict` (as recorded in dataset manifests and model cards).
+
+        Raises:
+            ValueError: a key that is not a setting (names it).
+        """
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown analytic settings {unknown}; known: {sorted(known)}")
+        friction = values.get("friction", "cone")
+        return cls(**{**values, "friction": tuple(friction) if isinstance(friction, list) else friction})  # type: ignore[arg-type]
 
     def as_dict(self) -> dict[str, object]:
         return {

@@ -45,7 +45,9 @@ class MarginMLP(nn.Module):
 
     ``forward(lam)``: (..., 47) -> (...) margin [m]. Gradients flow to lambda (for optimisation) and to
     the parameters (for training); the normalisation buffers are fixed. ``mirror_tied=True`` ties the
-    weights so that the network is exactly mirror-invariant (module docstring).
+    weights so that the network is exactly mirror-invariant (module docstring). ``widths`` other than the
+    paper's are for capacity experiments (``benchmarks/bench_margin_capacity.py``): such a network trains
+    and evaluates here, but its weights are refused by :class:`~margin_rl.stability.learned.MarginWeights`.
 
     Raises:
         ValueError: ``mirror_tied`` with a normalisation that is not mirror-symmetric (then the tied
@@ -62,9 +64,11 @@ class MarginMLP(nn.Module):
         lam_high: np.ndarray,
         dtype: torch.dtype = torch.float32,
         mirror_tied: bool = False,
+        widths: tuple[int, ...] = ARCHITECTURE,
     ) -> None:
         super().__init__()
-        widths = ARCHITECTURE
+        if len(widths) < 2 or widths[0] != len(input_mean) or widths[-1] != 1:
+            raise ValueError(f"widths must run from {len(input_mean)} inputs to 1 output, got {widths}")
         self.mirror_tied = bool(mirror_tied)
         self.activation = nn.Softsign()
         if self.mirror_tied:

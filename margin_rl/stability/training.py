@@ -18,12 +18,15 @@ held-out test metrics:
 
 * RMSE of m_l vs m_a overall and per band of |c_ddot_xy| and per number of contacts [cm];
 * sign agreement (stable m >= 0 vs unstable), true positive and true negative rates;
-* median cosine similarity between dm_l/dlambda and central finite differences of m_a.
+* median cosine similarity between dm_l/dlambda and central finite differences of m_a;
+* the paper's own protocol on fresh states (:mod:`margin_rl.stability.evaluation`): sign rates within two
+  standard deviations of the dataset, and the error along CoM-acceleration sweeps.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import shlex
 import sys
 import time
@@ -37,8 +40,9 @@ from margin_rl.dataset import Dataset, load_dataset
 from margin_rl.provenance import git_commit
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
+from margin_rl.stability.evaluation import evaluate as evaluate_protocol
 from margin_rl.stability.lambda_state import LAMBDA_SLICES, lambda_names, mirror_lambda
-from margin_rl.stability.learned import LearnedMargin, save_weights
+from margin_rl.stability.learned import ARCHITECTURE, LearnedMargin, save_weights
 from margin_rl.stability.margin_mlp import MarginMLP
 
 ACC_BANDS: tuple[tuple[float, float], ...] = ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, np.inf))
@@ -61,6 +65,10 @@ class TrainConfig:
     seed: int = 0
     max_samples: int | None = None
     grad_check_states: int = 200
+    # The paper's protocol on fresh Table I states (margin_rl.stability.evaluation): states labelled for the
+    # two-sigma reliability, and Table I base states for the acceleration sweeps; 0 skips either.
+    protocol_states: int = 25_000
+    protocol_sweeps: int = 40
     # Left-right symmetry (the analytic margin of ANYmal B and C is invariant under mirror_lambda):
     # "none" trains the plain network on the data as it is; "augment" adds the mirror image of every
     # training sample (twice the data, the plain network); "tied" trains a network whose weights are tied
@@ -81,6 +89,9 @@ def check_config(config: TrainConfig) -> TrainConfig:
     for name in ("epochs", "batch_size"):
         if getattr(config, name) < 1:
             raise ValueError(f"TrainConfig.{name} must be >= 1, got {getattr(config, name)}")
+    for name in ("grad_check_states", "protocol_states", "protocol_sweeps"):
+        if getattr(config, name) < 0:
+            raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(config, name)}")
     if not config.lr > 0 or not 0 <= config.min_lr <= config.lr:
         raise ValueError(f"need lr > 0 and 0 <= min_lr <= lr, got lr={config.lr}, min_lr={config.min_lr}")
     return config
@@ -116,8 +127,10 @@ def training_split(lam_train: np.ndarray, margin_train: np.ndarray, config: Trai
     return lam_train, margin_train
 
 
-def build_model(lam_train: np.ndarray, margin_train: np.ndarray, mirror: str = "none") -> MarginMLP:
-    """A fresh MLP whose normalisation is fitted on the training split.
+def build_model(
+    lam_train: np.ndarray, margin_train: np.ndarray, mirror: str = "none", widths: tuple[int, ...] = ARCHITECTURE
+) -> MarginMLP:
+    """A fresh MLP whose normalisation is fitted on the training split (``widths``: see :class:`MarginMLP`).
 
     With ``mirror`` "augment" or "tied" the normalisation and the recorded input ranges are those of the
     split together with its mirror images, so they are mirror-symmetric (needed by the tied network, and
@@ -134,10 +147,11 @@ def build_model(lam_train: np.ndarray, margin_train: np.ndarray, mirror: str = "
         lam_low=lam_train.min(axis=0),
         lam_high=lam_train.max(axis=0),
         mirror_tied=mirror == "tied",
+        widths=widths,
     )
 
 
-def _evaluate(model: MarginMLP, lam: torch.Tensor, margin: torch.Tensor, batch: int = 65536) -> float:
+def mean_squared_error(model: MarginMLP, lam: torch.Tensor, margin: torch.Tensor, batch: int = 65536) -> float:
     """Mean squared error [m^2] of the model on a split."""
     model.eval()
     total = 0.0
@@ -201,7 +215,7 @@ def fit(
                 scheduler.step()
             running += float(loss.detach()) * len(idx)
         train_mse = running / len(order) * float(model.output_scale[1]) ** 2
-        val_mse = _evaluate(model, xv, yv)
+        val_mse = mean_squared_error(model, xv, yv)
         if config.schedule == "plateau":
             scheduler.step(val_mse)
         lr = optimizer.param_groups[0]["lr"]
@@ -336,17 +350,17 @@ def train(
     manifest = ds.manifest
     robot = str(manifest["robot"])
     settings_dict = dict(manifest["analytic_settings"])  # type: ignore[arg-type]
+    settings = AnalyticSettings.from_dict(settings_dict)  # the labels' settings
     grad = {}
     if config.grad_check_states > 0:
-        settings = AnalyticSettings(
-            friction=tuple(settings_dict["friction"])
-            if isinstance(settings_dict["friction"], list)  # type: ignore[arg-type]
-            else settings_dict["friction"],  # type: ignore[arg-type]
-            focus_tol=1e-5,
-        )
         rng = np.random.default_rng(config.seed + 1)
         pick = rng.choice(split.test, size=min(config.grad_check_states, len(split.test)), replace=False)
-        grad = gradient_check(learned, robot, lam[pick], settings)
+        grad = gradient_check(learned, robot, lam[pick], dataclasses.replace(settings, focus_tol=1e-5))
+    protocol = {}
+    if config.protocol_states > 0:
+        protocol, _ = evaluate_protocol(
+            robot, learned, config.protocol_states, config.protocol_sweeps, settings=settings
+        )
     card = {
         "robot": robot,
         "description": "learned stability margin m_l(lambda) [m] of seed 000 §IV (47-256-128-128-1, softsign)"
@@ -368,6 +382,7 @@ def train(
         "training": {**config.__dict__, **summary},
         "test_metrics": metrics,
         "gradient_check": grad,
+        "paper_protocol": protocol,
         "robot_mass_kg": load_robot(robot).total_mass,
     }
     return save_weights(weights, out, card)
@@ -395,6 +410,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=defaults.seed)
     parser.add_argument("--max-samples", type=int, default=None)
     parser.add_argument("--grad-check-states", type=int, default=defaults.grad_check_states)
+    parser.add_argument(
+        "--protocol-states", type=int, default=defaults.protocol_states, help="fresh states for the paper's protocol"
+    )
+    parser.add_argument("--protocol-sweeps", type=int, default=defaults.protocol_sweeps)
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     parser.add_argument("--logdir", default=None, help="TensorBoard directory")
     parser.add_argument("--quiet", action="store_true")
@@ -411,6 +430,8 @@ def main(argv: list[str] | None = None) -> int:
         seed=args.seed,
         max_samples=args.max_samples,
         grad_check_states=args.grad_check_states,
+        protocol_states=args.protocol_states,
+        protocol_sweeps=args.protocol_sweeps,
         mirror=args.mirror,
     )
     command = "python -m margin_rl.stability.training " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))

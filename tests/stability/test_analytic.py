@@ -132,6 +132,13 @@ def test_settings_change_the_friction_model() -> None:
     assert st.mu == pytest.approx(0.3)
 
 
+def test_settings_round_trip_through_their_recorded_form() -> None:
+    for settings in (AnalyticSettings(), AnalyticSettings(friction=("pyramid", 8), focus_tol=1e-5, max_lps=30)):
+        assert AnalyticSettings.from_dict(settings.as_dict()) == settings
+    with pytest.raises(ValueError, match=r"unknown analytic settings \['focus'\]"):
+        AnalyticSettings.from_dict({"focus": 1e-3})
+
+
 def test_focused_margin_matches_a_fully_refined_region() -> None:
     """The focused projection's bracket holds: |m_focus - m_reference| <= focus_tol on Table I states.
 

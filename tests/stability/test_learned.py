@@ -191,9 +191,8 @@ def test_training_end_to_end_writes_a_complete_card(tmp_path: Path) -> None:
 
     data = tmp_path / "data"
     generate(DatasetSpec("anymal_b", 120, 60, 0, AnalyticSettings()), data, workers=1, progress=False)
-    card = train(
-        data, tmp_path / "w", TrainConfig(epochs=2, grad_check_states=2), logdir=tmp_path / "tb", progress=False
-    )
+    config = TrainConfig(epochs=2, grad_check_states=2, protocol_states=40, protocol_sweeps=1)
+    card = train(data, tmp_path / "w", config, logdir=tmp_path / "tb", progress=False)
     for key in (
         "dataset",
         "analytic_settings",
@@ -201,11 +200,14 @@ def test_training_end_to_end_writes_a_complete_card(tmp_path: Path) -> None:
         "training",
         "test_metrics",
         "gradient_check",
+        "paper_protocol",
         "sha256",
     ):
         assert key in card, key
     assert "margin_rl.dataset generate --robot anymal_b --n 120" in card["dataset"]["generation_command"]
     assert set(card["test_metrics"]) >= {"rmse_cm", "sign_agreement", "rmse_cm_by_acc_xy_band"}
+    assert card["paper_protocol"]["reliability"]["states_drawn"] == 40
+    assert card["paper_protocol"]["analytic_settings"] == card["analytic_settings"]
     assert list((tmp_path / "tb").iterdir()), "no TensorBoard events"
     model = LearnedMargin.load(tmp_path / "w.npz")
     assert np.isfinite(model(np.zeros(47)))
@@ -231,7 +233,8 @@ def test_fit_learns_a_smooth_function_and_anneals_the_rate(schedule: str) -> Non
 @pytest.mark.parametrize(
     ("field", "value", "message"),
     [("schedule", "linear", "schedule must be one of"), ("batch_size", 0, "batch_size must be >= 1"),
-     ("min_lr", 1.0, "min_lr <= lr"), ("mirror", "both", "mirror must be one of")],
+     ("min_lr", 1.0, "min_lr <= lr"), ("mirror", "both", "mirror must be one of"),
+     ("protocol_states", -1, "protocol_states must be >= 0")],
 )  # fmt: skip
 def test_bad_training_config_is_refused_naming_the_field(field: str, value: object, message: str) -> None:
     from margin_rl.stability.training import TrainConfig, check_config

@@ -245,6 +245,7 @@ def fit(
         "epochs_run": len(history),
         "best_epoch": best_epoch,
         "best_val_rmse_cm": 100 * float(best) ** 0.5,
+        "last_train_rmse_cm": history[-1]["train_rmse_cm"] if history else float("nan"),  # last epoch, running mean
         "final_lr": float(optimizer.param_groups[0]["lr"]),
         "train_seconds": time.perf_counter() - t0,
     }

@@ -226,6 +226,7 @@ def test_fit_learns_a_smooth_function_and_anneals_the_rate(schedule: str) -> Non
     model = build_model(lam[:2500], margin[:2500])
     summary = fit(model, lam[:2500], margin[:2500], lam[2500:], margin[2500:], config, progress=False)
     assert summary["best_val_rmse_cm"] < 0.25 * 100 * margin.std()
+    assert 0 < summary["last_train_rmse_cm"] < 0.25 * 100 * margin.std()
     if schedule == "cosine":
         assert summary["final_lr"] == pytest.approx(1e-4, rel=1e-6)
 

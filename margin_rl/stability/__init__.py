@@ -13,6 +13,7 @@ Robot layer (lambda in R^47, eq. 4)::
     analytic_margin(robot, lam)                      lambda -> IK -> region -> ICP -> m_a
     analytic_margin_batch(robot_name, lams)          the same over local processes
     LearnedMargin.load(robot)                        the learned margin (value, gradient, torch, ONNX)
+    evaluation.evaluate(robot_name, model)           the learned margin judged by the paper's protocol
     fwp_feasibility(robot, lam)                      the feasible-wrench-polytope factor s (seed 004)
 """
 

@@ -66,7 +66,8 @@ class TrainConfig:
     max_samples: int | None = None
     grad_check_states: int = 200
     # The paper's protocol on fresh Table I states (margin_rl.stability.evaluation): states labelled for the
-    # two-sigma reliability, and Table I base states for the acceleration sweeps; 0 skips either.
+    # two-sigma reliability (0 skips the whole protocol), and Table I base states for acceleration sweeps
+    # beside the nominal stances (0: the nominal stances only).
     protocol_states: int = 25_000
     protocol_sweeps: int = 40
     # Left-right symmetry (the analytic margin of ANYmal B and C is invariant under mirror_lambda):

@@ -4,7 +4,7 @@ Usage:
     python benchmarks/bench_margin_capacity.py --data data/anymal_c --max-samples 600000 --epochs 20 \\
         --widths 256,128,128 --widths 512,256,256 --widths 1024,512,512
     python benchmarks/bench_margin_capacity.py --data data/anymal_c --train-subset 20000 --epochs 400 \\
-        --widths 256,128,128                      # can the paper network fit (memorise) a small training set?
+        --schedule cosine --widths 256,128,128    # can the paper network fit (memorise) a small training set?
 
 Every ``--widths`` (hidden layers) trains a fresh softsign MLP with the bundled recipe (Adam, batch 256,
 lr 1e-3 halved on plateaus, no early stop) on the same seeded split of the first ``--max-samples`` ok
@@ -47,18 +47,25 @@ def main() -> None:
     parser.add_argument("--widths", action="append", required=True, help="hidden widths, e.g. 256,128,128")
     parser.add_argument("--epochs", type=int, default=20)
     parser.add_argument("--mirror", choices=("none", "tied"), default="none")
+    parser.add_argument(
+        "--schedule",
+        choices=("plateau", "cosine"),
+        default="plateau",
+        help="cosine for long fits of a small subset: the plateau schedule halves the rate to nothing once "
+        "the validation error stops falling",
+    )
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
     architectures = [parse_widths(text) for text in args.widths]
     config = check_config(TrainConfig(epochs=args.epochs, batch_size=256, patience=10**6, grad_check_states=0,
-                                      mirror=args.mirror))  # fmt: skip
+                                      mirror=args.mirror, schedule=args.schedule))  # fmt: skip
     torch.set_num_threads(args.threads)
     ds = load_dataset(args.data, max_samples=args.max_samples)
     lam, margin = ds.lam.astype(np.float64), ds.margin.astype(np.float64)
     split = split_indices(len(lam), config)
     train = split.train[: args.train_subset] if args.train_subset else split.train
     print(f"{args.data}: {len(lam):,} ok samples; {len(train):,} training, {len(split.val):,} validation; "
-          f"{args.epochs} epochs, batch 256, mirror {args.mirror}")  # fmt: skip
+          f"{args.epochs} epochs, batch 256, {args.schedule} schedule, mirror {args.mirror}")  # fmt: skip
     print(
         "| widths | parameters | train RMSE, last epoch [cm] | train RMSE at best val [cm] | best val RMSE [cm] "
         "| best epoch | wall [s] |\n|---|---|---|---|---|---|---|"

@@ -339,6 +339,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     npz = weights_path(args.weights or args.robot)
     model = LearnedMargin.load(npz)
+    if model.card.get("robot", args.robot) != args.robot:
+        parser.error(f"{npz} holds the learned margin of {model.card['robot']!r}, not of --robot {args.robot!r}")
     recorded = model.card.get("analytic_settings")  # the settings of the labels the network learned
     settings = AnalyticSettings.from_dict(recorded) if isinstance(recorded, dict) else None
     report, nominal = evaluate(args.robot, model, args.n, args.sweeps, args.seed, args.workers, settings)

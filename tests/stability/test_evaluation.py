@@ -119,3 +119,11 @@ def test_cli_update_card_keeps_the_weights_loadable(tmp_path: Path) -> None:
     assert card["paper_protocol"]["reliability"]["states_drawn"] == 20
     assert card["paper_protocol"]["analytic_settings"] == card["analytic_settings"]
     assert "table_i" not in card["paper_protocol"]["acceleration_sweeps"]
+
+
+def test_cli_refuses_weights_of_another_robot(capsys: pytest.CaptureFixture[str]) -> None:
+    from margin_rl.stability.learned import weights_path
+
+    with pytest.raises(SystemExit):
+        main(["--robot", "anymal_b", "--weights", str(weights_path("anymal_c")), "--n", "5"])
+    assert "learned margin of 'anymal_c', not of --robot 'anymal_b'" in capsys.readouterr().err

@@ -41,6 +41,7 @@ from margin_rl.provenance import git_commit
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
 from margin_rl.stability.evaluation import evaluate as evaluate_protocol
+from margin_rl.stability.evaluation import reliability
 from margin_rl.stability.lambda_state import LAMBDA_SLICES, lambda_names, mirror_lambda
 from margin_rl.stability.learned import ARCHITECTURE, LearnedMargin, save_weights
 from margin_rl.stability.margin_mlp import MarginMLP
@@ -258,7 +259,7 @@ def test_metrics(model: LearnedMargin, lam: np.ndarray, margin: np.ndarray) -> d
     err = pred - margin
     acc_xy = np.linalg.norm(lam[:, LAMBDA_SLICES["com_acc"]][:, :2], axis=1)
     n_contacts = lam[:, LAMBDA_SLICES["contacts"]].sum(axis=1).round().astype(int)
-    stable, stable_pred = margin >= 0, pred >= 0
+    signs = reliability(pred, margin)
     bands = {}
     for lo, hi in ACC_BANDS:
         sel = (acc_xy >= lo) & (acc_xy < hi)
@@ -275,10 +276,10 @@ def test_metrics(model: LearnedMargin, lam: np.ndarray, margin: np.ndarray) -> d
         "mae_cm": 100 * float(np.mean(np.abs(err))),
         "rmse_cm_by_acc_xy_band": bands,
         "rmse_cm_by_contacts": by_contacts,
-        "sign_agreement": float(np.mean(stable == stable_pred)),
-        "true_positive_rate": float(np.mean(stable_pred[stable])) if stable.any() else float("nan"),
-        "true_negative_rate": float(np.mean(~stable_pred[~stable])) if (~stable).any() else float("nan"),
-        "stable_fraction": float(np.mean(stable)),
+        "sign_agreement": signs.sign_agreement,
+        "true_positive_rate": signs.true_positive_rate,
+        "true_negative_rate": signs.true_negative_rate,
+        "stable_fraction": signs.stable_fraction,
     }
 
 

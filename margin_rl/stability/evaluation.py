@@ -220,7 +220,7 @@ def acceleration_sweeps(
         bases: named base states {name: (47,)} or an (S, 47) array (named by index).
         span: half-width of the sweep [m/s^2].
         points: grid points per sweep (odd keeps 0 on the grid).
-        settings: analytic settings (default: the dataset's).
+        settings: analytic settings; pass those recorded with the training labels (default: the package's).
         workers: processes for the analytic margin.
     """
     if isinstance(bases, dict):

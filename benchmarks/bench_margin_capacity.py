@@ -7,12 +7,13 @@ Usage:
         --schedule cosine --widths 256,128,128    # can the paper network fit (memorise) a small training set?
 
 Every ``--widths`` (hidden layers) trains a fresh softsign MLP with the bundled recipe (Adam, batch 256,
-lr 1e-3 halved on plateaus, or annealed with ``--schedule cosine``; no early stop) on the same seeded split of the first ``--max-samples`` ok
-samples, optionally cut to its first ``--train-subset`` training samples. It reports the RMSE on the
-training samples themselves (running mean over the last epoch, and with the best-validation weights) and
-the best validation RMSE, as a Markdown table. A network whose *training* error stays far above the target
-cannot reach the target on new states, whatever the amount of data; one whose training error falls below
-it and whose validation error follows is limited by data or training time instead.
+lr 1e-3 halved on plateaus, or annealed with ``--schedule cosine``; no early stop) on the same seeded
+split of the first ``--max-samples`` ok samples, optionally cut to its first ``--train-subset`` training
+samples. It reports the RMSE on the training samples themselves (running mean over the last epoch, and
+with the best-validation weights) and the best validation RMSE, as a Markdown table. A network whose
+*training* error stays far above the target cannot reach the target on new states, whatever the amount of
+data; one whose training error falls below it and whose validation error follows is limited by data or
+training time instead.
 """
 
 from __future__ import annotations

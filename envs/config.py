@@ -2,14 +2,169 @@
 
 Units: s, m, rad, N. ``dt`` scaling of rewards does not exist here: the reward of seed 000 §V-C is used
 as written (per policy step), and the shaped preset's weights are per policy step too.
+
+Every config checks its fields when it is built (``__post_init__``): a wrong type raises TypeError, a
+non-finite, wrongly signed or out-of-range number ValueError, each naming the field (``EnvConfig.margin_weight``)
+and the accepted values. Valid values are stored as given, never converted.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
+import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from margin_rl.envs.margin_kinds import check_margin_kind
 from margin_rl.envs.terrain import TerrainConfig
+from margin_rl.robot import available_robots
+
+MAX_TERRAIN_GRID_SIDE = 4001
+"""Most heightfield samples per side of a rough terrain (4001^2 float64 = 128 MB): a larger ``size /
+resolution`` is almost always a unit slip, and would exhaust memory before any error could be raised."""
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# field checks shared by the configs (and by the environments' own arguments)
+# ---------------------------------------------------------------------------------------------------------------------
+def _bounds_text(minimum: float | None, maximum: float | None, min_open: bool, max_open: bool) -> str:
+    parts = []
+    if minimum is not None:
+        parts.append(f"{'>' if min_open else '>='} {minimum:g}")
+    if maximum is not None:
+        parts.append(f"{'<' if max_open else '<='} {maximum:g}")
+    return " and ".join(parts)
+
+
+def _in_bounds(value: float, minimum: float | None, maximum: float | None, min_open: bool, max_open: bool) -> bool:
+    if minimum is not None and (value < minimum or (min_open and value == minimum)):
+        return False
+    return not (maximum is not None and (value > maximum or (max_open and value == maximum)))
+
+
+def is_real_number(value: object) -> bool:
+    """A real number (Python or numpy int/float), not a bool (``True`` as a weight is a mistake, not 1.0)."""
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def check_number(
+    where: str,
+    value: object,
+    *,
+    minimum: float | None = None,
+    maximum: float | None = None,
+    min_open: bool = False,
+    max_open: bool = False,
+    hint: str = "",
+) -> None:
+    """TypeError unless ``value`` is a real number; ValueError unless it is finite and within the bounds.
+
+    ``where`` names the field in the message (``"EnvConfig.margin_weight"``); ``hint`` says what the value means.
+    """
+    bounds = _bounds_text(minimum, maximum, min_open, max_open)
+    wanted = "a finite number" + (f" {bounds}" if bounds else "") + (f" ({hint})" if hint else "")
+    if not is_real_number(value):
+        example = f"; pass a number such as {where.rsplit('.', 1)[-1]}={float(value)}" if _parses(value) else ""
+        raise TypeError(f"{where} must be {wanted}, got {value!r} ({type(value).__name__}){example}")
+    if not math.isfinite(value) or not _in_bounds(value, minimum, maximum, min_open, max_open):
+        raise ValueError(f"{where} must be {wanted}, got {value!r}")
+
+
+def _parses(value: object) -> bool:
+    """Whether a str holds a number (the message then shows the number to pass instead)."""
+    if not isinstance(value, str):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except ValueError:
+        return False
+
+
+def check_int(where: str, value: object, *, minimum: int | None = None, maximum: int | None = None, hint: str = "") -> None:
+    """TypeError unless ``value`` is an integer (Python or numpy, not bool); ValueError outside the bounds."""
+    bounds = _bounds_text(minimum, maximum, False, False)
+    wanted = "an int" + (f" {bounds}" if bounds else "") + (f" ({hint})" if hint else "")
+    if not isinstance(value, numbers.Integral) or isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{where} must be {wanted}, got {value!r} ({type(value).__name__})")
+    if not _in_bounds(int(value), minimum, maximum, False, False):
+        raise ValueError(f"{where} must be {wanted}, got {value!r}")
+
+
+def check_range_pair(where: str, value: object, *, minimum: float | None = None, hint: str = "") -> None:
+    """``value`` must be a (low, high) pair of finite numbers with low <= high (and low >= ``minimum``).
+
+    Lists are accepted as well as tuples: configs read back from JSON (run directories) hold lists.
+    """
+    wanted = "a (low, high) pair of finite numbers with low <= high" + (
+        f", low >= {minimum:g}" if minimum is not None else ""
+    )
+    wanted += f" ({hint})" if hint else ""
+    pair_like = isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, (str, bytes))
+    if not pair_like or len(value) != 2 or not all(is_real_number(v) for v in value):
+        raise TypeError(f"{where} must be {wanted}, got {value!r} ({type(value).__name__})")
+    low, high = value
+    if not (math.isfinite(low) and math.isfinite(high)) or low > high:
+        raise ValueError(f"{where} must be {wanted}, got {value!r}")
+    if minimum is not None and low < minimum:
+        raise ValueError(f"{where} must be {wanted}, got {value!r}")
+
+
+def check_choice(where: str, value: object, choices: Sequence[str], hint: str = "") -> None:
+    """ValueError unless ``value`` is one of ``choices`` (a str field with a fixed set of names)."""
+    if not isinstance(value, str) or value not in choices:
+        raise ValueError(f"{where} must be one of {sorted(choices)}{f' ({hint})' if hint else ''}, got {value!r}")
+
+
+def check_optional_path(where: str, value: object) -> None:
+    """TypeError unless ``value`` is None, a str or a path (a weights file)."""
+    if value is not None and not isinstance(value, (str, os.PathLike)):
+        raise TypeError(f"{where} must be None or a path (str), got {value!r} ({type(value).__name__})")
+
+
+def check_instance(where: str, value: object, cls: type, hint: str) -> None:
+    """TypeError unless ``value`` is a ``cls`` (a nested config); ``hint`` says how to build one."""
+    if not isinstance(value, cls):
+        raise TypeError(f"{where} must be a {cls.__name__}, got {value!r} ({type(value).__name__}); {hint}")
+
+
+def check_terrain_config(config: TerrainConfig) -> None:
+    """Check a :class:`TerrainConfig` (called from its ``__post_init__``; lives here with the other checks)."""
+    where = "TerrainConfig"
+    check_number(f"{where}.size", config.size, minimum=0.0, min_open=True, hint="side of the square terrain [m]")
+    check_number(f"{where}.resolution", config.resolution, minimum=0.0, min_open=True, hint="grid spacing [m]")
+    check_number(f"{where}.tile", config.tile, minimum=0.0, min_open=True, hint="side of one tile [m]")
+    check_range_pair(f"{where}.step_height", config.step_height, minimum=0.0, hint="[m]")
+    check_number(
+        f"{where}.max_slope_deg", config.max_slope_deg, minimum=0.0, maximum=90.0, max_open=True, hint="degrees"
+    )
+    check_number(f"{where}.pad", config.pad, minimum=0.0, maximum=config.tile, hint="flat spawn pad [m], <= tile")
+    check_number(f"{where}.base_level", config.base_level, minimum=0.0, hint="[m]")
+    check_number(
+        f"{where}.max_height",
+        config.max_height,
+        minimum=config.base_level,
+        min_open=True,
+        hint="vertical extent of the heightfield [m], above base_level",
+    )
+    # The generator lays whole tiles of whole grid cells; other ratios would not fill the grid.
+    for name, outer, inner in (("size / tile", config.size, config.tile), ("tile / resolution", config.tile,
+                                                                           config.resolution)):
+        ratio = outer / inner
+        if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio):
+            raise ValueError(
+                f"{where}: {name} must be a whole number >= 1 (the terrain is whole tiles of whole grid cells), "
+                f"got size={config.size}, tile={config.tile}, resolution={config.resolution}"
+            )
+    side = round(config.size / config.resolution) + 1
+    if side > MAX_TERRAIN_GRID_SIDE:
+        raise ValueError(
+            f"{where}: size / resolution gives a {side} x {side} heightfield, more than {MAX_TERRAIN_GRID_SIDE} "
+            f"per side; use a coarser resolution or a smaller size (lengths are in metres)"
+        )
 
 REWARD_PRESETS: dict[str, dict[str, float]] = {
     # Seed 000 §V-C exactly: logistic velocity kernel plus the (weighted) learned margin.
@@ -41,7 +196,11 @@ class CommandConfig:
 
     forward_velocity: tuple[float, float] = (0.75, 0.75)
     lateral_velocity: tuple[float, float] = (0.0, 0.0)
-    yaw_rate: tuple[float, float] = (0.0, 0.0)
+    yaw_rate: tuple[float, float] = (0.0, 0.0)  # [rad/s]
+
+    def __post_init__(self) -> None:
+        for name in ("forward_velocity", "lateral_velocity", "yaw_rate"):
+            check_range_pair(f"CommandConfig.{name}", getattr(self, name), hint="(v, v) for a fixed command")
 
 
 @dataclass(frozen=True)
@@ -57,6 +216,23 @@ class RandomizationConfig:
     reset_joint_noise: float = 0.1  # uniform joint-angle noise at reset [rad]
     reset_velocity_noise: float = 0.1  # uniform base velocity noise at reset [m/s, rad/s]
 
+    def __post_init__(self) -> None:
+        where = "RandomizationConfig"
+        if self.friction is not None:
+            check_range_pair(f"{where}.friction", self.friction, minimum=0.0, hint="friction coefficients, or None")
+        if self.added_base_mass is not None:
+            check_range_pair(f"{where}.added_base_mass", self.added_base_mass, hint="[kg], or None")
+        if self.push_interval_s is not None:
+            check_number(
+                f"{where}.push_interval_s", self.push_interval_s, minimum=0.0, min_open=True, hint="[s], None: no pushes"
+            )
+        check_number(f"{where}.push_force", self.push_force, minimum=0.0, hint="[N]")
+        check_number(f"{where}.push_duration_s", self.push_duration_s, minimum=0.0, min_open=True, hint="[s]")
+        check_number(f"{where}.observation_noise", self.observation_noise, minimum=0.0, hint="0: none, 1: legged_gym")
+        # A joint offset beyond pi wraps around the circle: a larger value is a degrees-for-radians slip.
+        check_number(f"{where}.reset_joint_noise", self.reset_joint_noise, minimum=0.0, maximum=math.pi, hint="[rad]")
+        check_number(f"{where}.reset_velocity_noise", self.reset_velocity_noise, minimum=0.0, hint="[m/s, rad/s]")
+
 
 @dataclass(frozen=True)
 class TerminationConfig:
@@ -64,6 +240,14 @@ class TerminationConfig:
 
     min_base_height: float = 0.25  # base height above the terrain under it [m]
     max_tilt_rad: float = 1.0  # angle between the base z axis and the vertical
+
+    def __post_init__(self) -> None:
+        check_number("TerminationConfig.min_base_height", self.min_base_height, minimum=0.0, hint="[m]")
+        # Tilt is an angle to the vertical, at most pi: a larger bound is a degrees-for-radians slip.
+        check_number(
+            "TerminationConfig.max_tilt_rad", self.max_tilt_rad, minimum=0.0, maximum=math.pi, min_open=True,
+            hint="[rad]; pi never ends an episode on tilt",
+        )
 
 
 @dataclass(frozen=True)
@@ -77,9 +261,7 @@ class EnvConfig:
     action_scale: float = 0.5  # joint-target offset [rad] per unit action
     episode_length_s: float = 20.0
     reward_preset: str = "paper"
-    # "learned", "analytic" (slow, ~2 ms per env step: validation), "fwp" (the feasible-wrench-polytope
-    # factor s of seed 004 as the margin term, dimensionless, ~4-12 ms per env step) or "none"
-    margin: str = "learned"
+    margin: str = "learned"  # a name of margin_rl.envs.margin_kinds.MARGIN_KINDS
     margin_weight: float = 1.0  # weight of the margin term; 0 is the baseline of the comparison
     margin_weights: str | None = None  # learned-margin weights (.npz with its card); None: the robot's bundled
     # reward per policy step while the episode runs, added to any preset (the comparison gives both variants
@@ -93,18 +275,40 @@ class EnvConfig:
     termination: TerminationConfig = field(default_factory=TerminationConfig)
 
     def __post_init__(self) -> None:
-        if self.terrain not in ("flat", "rough"):
-            raise ValueError(f"terrain must be 'flat' or 'rough', got {self.terrain!r}")
-        if self.reward_preset not in REWARD_PRESETS:
-            raise ValueError(f"reward_preset must be one of {sorted(REWARD_PRESETS)}, got {self.reward_preset!r}")
-        if self.margin not in ("learned", "analytic", "fwp", "none"):
-            raise ValueError(f"margin must be 'learned', 'analytic', 'fwp' or 'none', got {self.margin!r}")
-        if not 0.0 <= self.alive_bonus < float("inf"):
-            raise ValueError(f"alive_bonus must be finite and >= 0, got {self.alive_bonus}")
-        if self.decimation < 1 or self.action_scale <= 0 or self.episode_length_s <= 0:
-            raise ValueError("decimation, action_scale and episode_length_s must be positive")
-        if not 0.0 <= self.acceleration_filter < 1.0:
-            raise ValueError(f"acceleration_filter must be in [0, 1), got {self.acceleration_filter}")
+        where = "EnvConfig"
+        check_choice(f"{where}.robot", self.robot, available_robots())
+        check_choice(f"{where}.terrain", self.terrain, ("flat", "rough"))
+        check_choice(f"{where}.reward_preset", self.reward_preset, tuple(REWARD_PRESETS))
+        check_margin_kind(self.margin)
+        for name, cls in (
+            ("terrain_config", TerrainConfig),
+            ("command", CommandConfig),
+            ("randomization", RandomizationConfig),
+            ("termination", TerminationConfig),
+        ):
+            value = getattr(self, name)
+            built = f"{name}={cls.__name__}(**{value!r})" if isinstance(value, dict) else f"{name}={cls.__name__}(...)"
+            check_instance(f"{where}.{name}", value, cls, f"pass {built}")
+        check_int(f"{where}.decimation", self.decimation, minimum=1, hint="physics steps per policy step")
+        check_number(f"{where}.action_scale", self.action_scale, minimum=0.0, min_open=True, hint="[rad] per unit")
+        check_number(f"{where}.episode_length_s", self.episode_length_s, minimum=0.0, min_open=True, hint="[s]")
+        # A negative weight would reward instability; 0 is the without-margin baseline of the comparison.
+        check_number(
+            f"{where}.margin_weight", self.margin_weight, minimum=0.0, hint="0: the baseline without the margin term"
+        )
+        check_optional_path(f"{where}.margin_weights", self.margin_weights)
+        check_number(f"{where}.alive_bonus", self.alive_bonus, minimum=0.0, hint="reward per step while alive")
+        # L is even (L(x) = L(-x)), so only the gain's size matters; 0 would make the velocity term constant.
+        check_number(f"{where}.logistic_gain", self.logistic_gain, minimum=0.0, min_open=True, hint="[s/m]")
+        check_number(
+            f"{where}.acceleration_filter", self.acceleration_filter, minimum=0.0, maximum=1.0, max_open=True,
+            hint="EMA factor, 0: no filter",
+        )
+        if not isinstance(self.privileged_observations, (bool, np.bool_)):
+            raise TypeError(
+                f"{where}.privileged_observations must be True or False, got {self.privileged_observations!r} "
+                f"({type(self.privileged_observations).__name__})"
+            )
 
     def replace(self, **changes: object) -> EnvConfig:
         """A copy with some fields changed (configs are never mutated)."""

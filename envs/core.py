@@ -4,38 +4,37 @@ One :class:`AnymalCore` steps ``num_envs`` MuJoCo simulations with ``mujoco.batc
 thread pool, evaluates the stability margin once per batch per step, and autoresets finished
 environments in the same step (their last observation is returned separately).
 
-Per policy step (``decimation`` physics steps at the MJCF timestep):
+:meth:`AnymalCore.step` runs these stages, each a method of its own, once per policy step:
 
-* action a in [-1, 1]^12 (clipped; NaN raises) -> position-servo targets ctrl = ctrl_standing + s a,
-  with ctrl_standing the keyframe's equilibrium targets, so a = 0 holds the standing pose;
-* lambda (seed 000 eq. 4) from the simulator (:func:`lambda_from_simulation`):
-  - e_g: third row of the base orientation; CoM and its velocity from the MJCF's subtree sensors;
-  - CoM acceleration and base angular acceleration by finite differences of the CoM velocity and
-    of the base angular velocity (world frame) over the policy step (20 ms: the mean acceleration
-    over the step, exact on average), optionally smoothed by an exponential filter
-    (``EnvConfig.acceleration_filter``, off by default);
-  - a push applied to the base (xfrc_applied) as f_ext / tau_ext;
-  - feet (foot-sphere centres) relative to the CoM and terrain normals under the feet, rotated into
-    the horizontal frame (yaw of the base heading); friction of the terrain; contact flags from the
-    MJCF's foot-world contact sensors;
-* margin m(lambda): learned (batch MLP), analytic (per env, slow), the FWP feasibility factor s of
-  seed 004 (per env, slower, dimensionless) or zero, clipped to ``MARGIN_CLIP`` (states with no
-  equilibrium get the lower clip);
-* reward terms (:mod:`margin_rl.envs.rewards`), terminations (base or thigh contact, height or tilt
-  bounds, a diverged simulation) and truncation at the episode length.
+1. ``_actuate``: action a in [-1, 1]^12 (clipped; NaN raises) -> position-servo targets
+   ctrl = ctrl_standing + s a (ctrl_standing: the keyframe's equilibrium targets, so a = 0 holds the
+   standing pose); pushes written to the base (xfrc_applied);
+2. ``_simulate``: ``decimation`` physics steps at the MJCF timestep, and the divergence check
+   (:meth:`_invalid_state` before and after the step, and a clock that did not advance);
+3. ``_measure``: the world-frame state (:class:`SimulationState`) from the batch's arrays;
+4. ``_estimate_accelerations``: CoM, base angular and joint accelerations by finite differences over
+   the policy step (20 ms: the mean acceleration over the step, exact on average), the first two
+   optionally smoothed by an exponential filter (``EnvConfig.acceleration_filter``, off by default);
+5. ``_stability``: lambda (seed 000 eq. 4, :mod:`margin_rl.envs.stability_input`) and the margin of the
+   configured kind (:mod:`margin_rl.envs.margin_kinds`), clipped to :data:`MARGIN_CLIP` (states the
+   kind cannot rate get the lower clip); a push enters lambda as f_ext;
+6. ``_track_air_time``: touchdowns and the air time of each foot;
+7. rewards (:mod:`margin_rl.envs.rewards`), ``_terminations`` (base or thigh contact, height or tilt
+   bounds, a diverged simulation) and truncation at the episode length, ``_info``;
+8. observations and the same-step autoreset of finished environments.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import dataclasses
 from dataclasses import dataclass
-from pathlib import Path
 
 import mujoco
 import numpy as np
 from mujoco import batch as mj_batch
 
 from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.margin_kinds import make_margin_function
 from margin_rl.envs.observations import (
     FOOT_HEIGHT_OFFSETS,
     POLICY_OBSERVATIONS,
@@ -43,96 +42,68 @@ from margin_rl.envs.observations import (
     assemble,
 )
 from margin_rl.envs.rewards import compute_rewards
-from margin_rl.envs.terrain import Terrain, flat_terrain, rough_terrain
-from margin_rl.robot import Robot, load_robot, quat_wxyz_to_matrix
-from margin_rl.stability.lambda_state import LAMBDA_DIM, StabilityState, from_lambda
+from margin_rl.envs.scene import build_model
+from margin_rl.envs.stability_input import (
+    heading_rotation,
+    lambda_from_simulation,
+    stability_state_from_simulation,
+    stance_width,
+)
+from margin_rl.envs.terrain import flat_terrain, rough_terrain
+from margin_rl.robot import load_robot, quat_wxyz_to_matrix
+from margin_rl.stability.lambda_state import LAMBDA_DIM, StabilityState
+
+__all__ = [
+    "MARGIN_CLIP",
+    "AnymalCore",
+    "SimulationState",
+    "StepOutput",
+    "heading_rotation",
+    "lambda_from_simulation",
+]
 
 MARGIN_CLIP: tuple[float, float] = (-0.5, 0.5)
 """Range [m] the margin term is clipped to (the learned model extrapolates outside its data)."""
 
-
-def _or_nan(evaluate: Callable[[], float]) -> float:
-    """A per-environment margin, NaN where its state is invalid (e.g. a diverged simulation's lambda)."""
-    try:
-        return float(evaluate())
-    except ValueError:
-        return float("nan")
+DIVERGED_SPEED = 1e3
+"""A generalised velocity above this (m/s, rad/s) marks a simulation as diverged."""
 
 
-def heading_rotation(base_rotation: np.ndarray) -> np.ndarray:
-    """Rotation (..., 3, 3) of the horizontal frame H in the world: the yaw of the base x axis."""
-    yaw = np.arctan2(base_rotation[..., 1, 0], base_rotation[..., 0, 0])
-    c, s = np.cos(yaw), np.sin(yaw)
-    zero, one = np.zeros_like(c), np.ones_like(c)
-    return np.stack([np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1), np.stack([zero, zero, one], -1)], -2)
+@dataclass(frozen=True)
+class SimulationState:
+    """World-frame state of some environments, read from the batch's arrays (N leading)."""
+
+    base_pos: np.ndarray  # (N, 3) [m]
+    base_rot: np.ndarray  # (N, 3, 3) R_WB
+    lin_vel_world: np.ndarray  # (N, 3) base linear velocity [m/s]
+    ang_vel_body: np.ndarray  # (N, 3) base angular velocity, base frame [rad/s]
+    ang_vel_world: np.ndarray  # (N, 3) [rad/s]
+    joint_pos: np.ndarray  # (N, 12) [rad]
+    joint_vel: np.ndarray  # (N, 12) [rad/s]
+    com: np.ndarray  # (N, 3) whole-body CoM [m]
+    com_vel: np.ndarray  # (N, 3) [m/s]
+    feet: np.ndarray  # (N, 4, 3) foot-sphere centres [m]
+    contacts: np.ndarray  # (N, 4) bool, foot-terrain contact
+    base_contact: np.ndarray  # (N,) bool
+    thigh_contacts: np.ndarray  # (N, 4) bool
+
+    def finite(self) -> SimulationState:
+        """The same state with every non-finite float replaced by 0 (a diverged step's bookkeeping)."""
+        changes = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if value.dtype.kind == "f":
+                changes[f.name] = np.where(np.isfinite(value), value, 0.0)
+        return dataclasses.replace(self, **changes)
 
 
-def lambda_from_simulation(
-    base_rotation: np.ndarray,
-    com: np.ndarray,
-    com_vel: np.ndarray,
-    com_acc: np.ndarray,
-    base_ang_acc: np.ndarray,
-    ext_force: np.ndarray,
-    ext_torque: np.ndarray,
-    feet: np.ndarray,
-    mu: np.ndarray,
-    contacts: np.ndarray,
-    normals: np.ndarray,
-) -> np.ndarray:
-    """lambda (N, 47) from world-frame simulator quantities (all (N, ...), world frame, SI units).
+@dataclass(frozen=True)
+class Accelerations:
+    """Finite-difference accelerations over the policy step (world frame; CoM and base possibly filtered)."""
 
-    e_g is the third row of the base rotation; every other vector is rotated into the horizontal frame
-    H (yaw of the base heading) and the feet are taken relative to the CoM.
-    """
-    R_wh = heading_rotation(base_rotation)
-
-    def to_h(v: np.ndarray) -> np.ndarray:  # world -> H for (N, 3) or (N, k, 3)
-        return np.einsum("nji,n...j->n...i", R_wh, v)
-
-    state = StabilityState(
-        gravity_axis=base_rotation[:, 2, :],
-        com_vel=to_h(com_vel),
-        com_acc=to_h(com_acc),
-        base_ang_acc=to_h(base_ang_acc),
-        ext_force=to_h(ext_force),
-        ext_torque=to_h(ext_torque),
-        feet=to_h(feet - com[:, None, :]),
-        mu=np.asarray(mu, dtype=float),
-        contacts=np.asarray(contacts, dtype=float),
-        normals=to_h(normals),
-    )
-    return state.to_lambda()
-
-
-def build_model(robot: Robot, terrain: Terrain, config: EnvConfig) -> mujoco.MjModel:
-    """The robot on its terrain: the flat scene file, or the robot plus a generated heightfield."""
-    if terrain.is_flat:
-        return mujoco.MjModel.from_xml_path(str(robot.scene_path))
-    h = terrain.heights
-    n = h.shape[0]
-    half = (n - 1) * terrain.resolution / 2
-    z_top = config.terrain_config.max_height
-    xml = f"""
-<mujoco model="{robot.name}_rough">
-  <include file="{Path(robot.xml_path).as_posix()}"/>
-  <visual><global offwidth="1280" offheight="720"/></visual>
-  <asset>
-    <hfield name="terrain" nrow="{n}" ncol="{n}" size="{half} {half} {z_top} 0.1"/>
-    <texture type="2d" name="grid" builtin="checker" rgb1="0.35 0.4 0.45" rgb2="0.25 0.3 0.35" width="300"
-             height="300"/>
-    <material name="grid" texture="grid" texrepeat="24 24"/>
-  </asset>
-  <worldbody>
-    <light pos="0 0 5" dir="0 0 -1" directional="true"/>
-    <geom name="floor" type="hfield" hfield="terrain" material="grid" contype="1" conaffinity="1" condim="3"
-          friction="1.0 0.005 0.0001" priority="1"/>
-  </worldbody>
-</mujoco>"""
-    model = mujoco.MjModel.from_xml_string(xml)
-    # MuJoCo hfield data: row-major, rows along y, columns along x, values in [0, 1] of z_top.
-    model.hfield_data[:] = (h / z_top).ravel()
-    return model
+    com: np.ndarray  # (N, 3) [m/s^2]
+    base_angular: np.ndarray  # (N, 3) [rad/s^2]
+    joints: np.ndarray  # (N, 12) [rad/s^2], unfiltered
 
 
 @dataclass(frozen=True)
@@ -163,7 +134,7 @@ class AnymalCore:
         self.autoreset, self.truncate = autoreset, truncate
         self.robot = load_robot(config.robot)
         self.terrain = flat_terrain() if config.terrain == "flat" else rough_terrain(config.terrain_config, seed or 0)
-        self.model = build_model(self.robot, self.terrain, config)
+        self.model = build_model(self.robot, self.terrain, config.terrain_config)
         self.dt = float(self.model.opt.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
         self.batch = mj_batch.Batch(self.model, nsim=num_envs, nthread=0)
@@ -178,6 +149,10 @@ class AnymalCore:
         self._sensor = {
             m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i]) for i in range(m.nsensor)
         }
+        # First entry ("found") of each contact sensor, gathered with one index per step.
+        self._foot_contact_adr = np.array([m.sensor(f"{leg}_foot_contact").adr[0] for leg in self.robot.leg_names])
+        self._thigh_contact_adr = np.array([m.sensor(f"{leg}_THIGH_contact").adr[0] for leg in self.robot.leg_names])
+        self._base_contact_adr = int(m.sensor("base_contact").adr[0])
         key = m.key("standing").id
         self._key_qpos, self._key_ctrl = m.key_qpos[key].copy(), m.key_ctrl[key].copy()
         self._standing_joint_pos = self.robot.standing_joint_pos
@@ -185,7 +160,7 @@ class AnymalCore:
         self._friction = self.batch.expand("geom_friction")
         base_friction = float(m.geom_friction[self._floor, 0])
         self.mu = np.full(num_envs, base_friction)
-        self._margin_fn = self._make_margin_fn()
+        self._margin_fn = make_margin_function(config.margin, self.robot, config.margin_weights, MARGIN_CLIP[0])
         self.rng = np.random.default_rng(seed)
         self._added_mass = np.zeros(num_envs)
         if config.randomization.added_base_mass is not None:
@@ -211,43 +186,6 @@ class AnymalCore:
         self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
         self._last_margin = np.zeros(n)
         self._last_lambda = np.zeros((n, LAMBDA_DIM))
-
-    # ------------------------------------------------------------------ margin
-    def _make_margin_fn(self):
-        kind = self.config.margin
-        if kind == "none":
-            return lambda lam: np.zeros(len(lam))
-        if kind == "learned":
-            from threadpoolctl import ThreadpoolController
-
-            from margin_rl.stability.learned import LearnedMargin
-
-            model = LearnedMargin.load(self.config.margin_weights or self.config.robot)
-            # OpenBLAS threads even these small GEMMs; on a few cores they collide with MuJoCo's thread
-            # pool (measured 4x slower env steps), so the margin runs on one BLAS thread (~16 us to switch).
-            blas = ThreadpoolController()
-
-            def learned(lam: np.ndarray) -> np.ndarray:
-                with blas.limit(limits=1, user_api="blas"):
-                    return np.asarray(model(lam))
-
-            return learned
-        if kind == "fwp":
-            from margin_rl.stability.fwp import fwp_feasibility
-
-            def fwp(lam: np.ndarray) -> np.ndarray:
-                # s <= 1 is dimensionless (a relative depth in the wrench polytope), not a distance.
-                values = np.array([_or_nan(lambda x=x: fwp_feasibility(self.robot, x).s) for x in lam])
-                return np.where(np.isfinite(values), values, MARGIN_CLIP[0])
-
-            return fwp
-        from margin_rl.stability.analytic import analytic_margin
-
-        def analytic(lam: np.ndarray) -> np.ndarray:
-            values = np.array([_or_nan(lambda x=x: analytic_margin(self.robot, x).margin) for x in lam])
-            return np.where(np.isfinite(values), values, MARGIN_CLIP[0])
-
-        return analytic
 
     # ------------------------------------------------------------------ reset
     def reset(self, ids: np.ndarray | None = None, seed: int | None = None) -> None:
@@ -289,9 +227,9 @@ class AnymalCore:
         self.last_action[ids] = 0.0
         self.episode_step[ids] = 0
         state = self._read(ids)
-        self._prev_com_vel[ids] = state["com_vel"]
-        self._prev_ang_vel[ids] = state["ang_vel_world"]
-        self._prev_joint_vel[ids] = state["joint_vel"]
+        self._prev_com_vel[ids] = state.com_vel
+        self._prev_ang_vel[ids] = state.ang_vel_world
+        self._prev_joint_vel[ids] = state.joint_vel
         self._com_acc[ids] = 0.0
         self._ang_acc[ids] = 0.0
         self._air_time[ids] = 0.0
@@ -302,138 +240,53 @@ class AnymalCore:
             self._next_push[ids] = rng.exponential(rnd.push_interval_s / self.dt, size=len(ids))
 
     # ------------------------------------------------------------------ state
-    def _read(self, ids: np.ndarray | slice = slice(None)) -> dict[str, np.ndarray]:
+    def _read(self, ids: np.ndarray | slice = slice(None)) -> SimulationState:
         """World-frame state of environments ``ids`` from the batch's live arrays."""
         qpos, qvel, sens = self._qpos[ids], self._qvel[ids], self._sensors[ids]
-        quat = qpos[:, 3:7]
-        R = quat_wxyz_to_matrix(quat)
-        return {
-            "base_pos": qpos[:, 0:3],
-            "base_rot": R,
-            "lin_vel_world": qvel[:, 0:3],
-            "ang_vel_body": qvel[:, 3:6],
-            "ang_vel_world": np.einsum("nij,nj->ni", R, qvel[:, 3:6]),
-            "joint_pos": qpos[:, 7:],
-            "joint_vel": qvel[:, 6:],
-            "com": sens[:, self._sensor["com"]],
-            "com_vel": sens[:, self._sensor["com_vel"]],
-            "feet": self._site_xpos[ids][:, self._feet],
-            "contacts": np.stack(
-                [sens[:, self._sensor[f"{leg}_foot_contact"]][:, 0] > 0 for leg in self.robot.leg_names], axis=1
-            ),
-            "base_contact": sens[:, self._sensor["base_contact"]][:, 0] > 0,
-            "thigh_contacts": np.stack(
-                [sens[:, self._sensor[f"{leg}_THIGH_contact"]][:, 0] > 0 for leg in self.robot.leg_names], axis=1
-            ),
-        }
+        R = quat_wxyz_to_matrix(qpos[:, 3:7])
+        return SimulationState(
+            base_pos=qpos[:, 0:3],
+            base_rot=R,
+            lin_vel_world=qvel[:, 0:3],
+            ang_vel_body=qvel[:, 3:6],
+            ang_vel_world=np.einsum("nij,nj->ni", R, qvel[:, 3:6]),
+            joint_pos=qpos[:, 7:],
+            joint_vel=qvel[:, 6:],
+            com=sens[:, self._sensor["com"]],
+            com_vel=sens[:, self._sensor["com_vel"]],
+            feet=self._site_xpos[ids][:, self._feet],
+            contacts=sens[:, self._foot_contact_adr] > 0,
+            base_contact=sens[:, self._base_contact_adr] > 0,
+            thigh_contacts=sens[:, self._thigh_contact_adr] > 0,
+        )
 
     # ------------------------------------------------------------------ step
     def step(self, actions: np.ndarray) -> StepOutput:
-        """Advance every environment by one policy step (see the module docstring)."""
-        a = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 12)
-        if not np.all(np.isfinite(a)):
-            raise ValueError("actions contain NaN or inf")
-        a = np.clip(a, -1.0, 1.0)
+        """Advance every environment by one policy step (the stages of the module docstring)."""
         cfg = self.config
-        self._ctrl[:] = self._key_ctrl + cfg.action_scale * a
-        self._apply_pushes()
-        # A state that is already non-finite or exploding (e.g. written by a user) is not stepped further.
-        diverged = ~np.all(np.isfinite(self._qvel), axis=1) | np.any(np.abs(self._qvel) > 1e3, axis=1)
-        diverged |= ~np.all(np.isfinite(self._qpos), axis=1)
-        time_before = self._time.copy()
-        try:
-            self.batch.step(nstep=cfg.decimation, stage=mujoco.mjtStage.mjSTAGE_ACC)
-        except mj_batch.SimulationError as exc:  # a simulation failed: end its episode, keep the others
-            diverged[np.asarray(exc.ids, dtype=np.int64)] = True
-        # MuJoCo resets a simulation whose accelerations blow up (a "bad QACC" warning) instead of raising;
-        # its clock then usually fails to advance by the step, which is how such a divergence is caught here
-        # (velocities above 1e3 are caught before or after the step).
-        expected = time_before + cfg.decimation * self.model.opt.timestep
-        diverged |= np.abs(self._time - expected) > 0.5 * self.model.opt.timestep
-        diverged |= ~np.all(np.isfinite(self._qpos), axis=1) | ~np.all(np.isfinite(self._qvel), axis=1)
-        diverged |= np.any(np.abs(self._qvel) > 1e3, axis=1)
+        action = self._actuate(actions)
+        diverged = self._simulate()
         self.episode_step += 1
-        s = self._read()
-        if diverged.any():  # keep the numbers finite for this step's bookkeeping
-            for key, value in s.items():
-                if value.dtype.kind == "f":
-                    s[key] = np.where(np.isfinite(value), value, 0.0)
-
-        # Accelerations: finite differences over the policy step, optionally filtered.
-        alpha = cfg.acceleration_filter
-        com_acc = (s["com_vel"] - self._prev_com_vel) / self.dt
-        ang_acc = (s["ang_vel_world"] - self._prev_ang_vel) / self.dt
-        self._com_acc = alpha * self._com_acc + (1 - alpha) * com_acc
-        self._ang_acc = alpha * self._ang_acc + (1 - alpha) * ang_acc
-        joint_acc = (s["joint_vel"] - self._prev_joint_vel) / self.dt
-        self._prev_com_vel, self._prev_ang_vel = s["com_vel"].copy(), s["ang_vel_world"].copy()
-        self._prev_joint_vel = s["joint_vel"].copy()
-
-        # Stability input and margin (one evaluation for the whole batch).
-        normals = self.terrain.normal(s["feet"][..., :2])
-        ext_force = self._push_force * (self._push_steps_left > 0)[:, None]
-        lam = lambda_from_simulation(
-            s["base_rot"],
-            s["com"],
-            s["com_vel"],
-            self._com_acc,
-            self._ang_acc,
-            ext_force,
-            np.zeros_like(ext_force),
-            s["feet"],
-            self.mu,
-            s["contacts"],
-            normals,
-        )
-        margin = np.clip(self._margin_fn(lam), *MARGIN_CLIP)
-        self._last_margin, self._last_lambda = margin, lam
-
-        # Feet air time (bookkeeping before the rewards, so a zero weight changes nothing).
-        touchdown = s["contacts"] & ~self._prev_contacts
-        self._air_time += self.dt
-        air_at_touchdown = np.where(touchdown, self._air_time, 0.0)
-        self._air_time = np.where(s["contacts"], 0.0, self._air_time)
-        self._prev_contacts = s["contacts"].copy()
-
-        R = s["base_rot"]
+        state = self._measure(diverged)
+        acc = self._estimate_accelerations(state)
+        stability, margin = self._stability(state, acc)
+        touchdown, air_at_touchdown = self._track_air_time(state.contacts)
         values = {
-            **self._policy_values(s, slice(None)),
+            **self._policy_values(state, slice(None)),
             "margin": margin,
             "torques": self._forces.copy(),
-            "action": a,
+            "action": action,
             "last_action": self.last_action,
-            "joint_acc": joint_acc,
+            "joint_acc": acc.joints,
             "touchdown": touchdown,
             "air_time_at_touchdown": air_at_touchdown,
-            "thigh_contacts": s["thigh_contacts"],
+            "thigh_contacts": state.thigh_contacts,
         }
         reward, terms = compute_rewards(cfg.reward_weights, values, cfg.logistic_gain)
-        self.last_action = a.copy()
-
-        ground = self.terrain.height(s["base_pos"][:, :2])
-        tilt_cos = R[:, 2, 2]
-        terminated = (
-            s["base_contact"]
-            | s["thigh_contacts"].any(axis=1)
-            | (s["base_pos"][:, 2] - ground < cfg.termination.min_base_height)
-            | (tilt_cos < np.cos(cfg.termination.max_tilt_rad))
-            | diverged
-        )
+        self.last_action = action.copy()
+        terminated = self._terminations(state, diverged)
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
-        feet_h = from_lambda(lam).feet  # feet relative to the CoM in the heading frame, as built above
-        info = {
-            **{f"reward_{k}": v for k, v in terms.items()},
-            "margin": margin,
-            "base_lin_acc": np.einsum("nji,nj->ni", R, self._com_acc),  # CoM acceleration, base frame
-            "base_ang_acc": np.einsum("nji,nj->ni", R, self._ang_acc),  # base frame
-            "base_lin_vel": values["base_lin_vel"],
-            "velocity_error": np.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
-            "contacts": s["contacts"].astype(np.float64),
-            "stance_width": 0.5
-            * (np.abs(feet_h[:, 0, 1] - feet_h[:, 1, 1]) + np.abs(feet_h[:, 2, 1] - feet_h[:, 3, 1])),
-            "fell": (terminated & ~diverged).astype(np.float64),
-            "diverged": diverged.astype(np.float64),
-        }
+        info = self._info(state, values, terms, margin, stability, terminated, diverged)
         observation = self._observe(values)
         final_observation = observation.copy()
         done = terminated | truncated
@@ -443,6 +296,130 @@ class AnymalCore:
             observation[ids] = self._observe_ids(ids)
         privileged = self.privileged_observation() if cfg.privileged_observations else None
         return StepOutput(observation, reward, terminated, truncated, info, final_observation, privileged)
+
+    def _actuate(self, actions: np.ndarray) -> np.ndarray:
+        """Clip the actions, write the servo targets and this step's pushes; returns the clipped actions."""
+        a = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 12)
+        if not np.all(np.isfinite(a)):
+            raise ValueError("actions contain NaN or inf")
+        a = np.clip(a, -1.0, 1.0)
+        self._ctrl[:] = self._key_ctrl + self.config.action_scale * a
+        self._apply_pushes()
+        return a
+
+    def _invalid_state(self) -> np.ndarray:
+        """(N,) True where qpos or qvel is non-finite or a velocity exceeds :data:`DIVERGED_SPEED`."""
+        qpos, qvel = self._qpos, self._qvel
+        return (
+            ~np.all(np.isfinite(qvel), axis=1)
+            | np.any(np.abs(qvel) > DIVERGED_SPEED, axis=1)
+            | ~np.all(np.isfinite(qpos), axis=1)
+        )
+
+    def _simulate(self) -> np.ndarray:
+        """Step the physics ``decimation`` times; returns the (N,) divergence flags.
+
+        A state that was already invalid before the step (e.g. written by a user) is flagged too. MuJoCo resets
+        a simulation whose accelerations blow up (a "bad QACC" warning) instead of raising; its clock then fails
+        to advance by the step, which is how such a divergence is caught here.
+        """
+        diverged = self._invalid_state()
+        time_before = self._time.copy()
+        try:
+            self.batch.step(nstep=self.config.decimation, stage=mujoco.mjtStage.mjSTAGE_ACC)
+        except mj_batch.SimulationError as exc:  # a simulation failed: end its episode, keep the others
+            diverged[np.asarray(exc.ids, dtype=np.int64)] = True
+        expected = time_before + self.config.decimation * self.model.opt.timestep
+        diverged |= np.abs(self._time - expected) > 0.5 * self.model.opt.timestep
+        return diverged | self._invalid_state()
+
+    def _measure(self, diverged: np.ndarray) -> SimulationState:
+        """The state after the step; a diverged environment's numbers are made finite for the bookkeeping."""
+        state = self._read()
+        return state.finite() if diverged.any() else state
+
+    def _estimate_accelerations(self, state: SimulationState) -> Accelerations:
+        """Finite differences of the velocities over the policy step, the CoM and base ones EMA-filtered."""
+        alpha = self.config.acceleration_filter
+        com_acc = (state.com_vel - self._prev_com_vel) / self.dt
+        ang_acc = (state.ang_vel_world - self._prev_ang_vel) / self.dt
+        self._com_acc = alpha * self._com_acc + (1 - alpha) * com_acc
+        self._ang_acc = alpha * self._ang_acc + (1 - alpha) * ang_acc
+        joint_acc = (state.joint_vel - self._prev_joint_vel) / self.dt
+        self._prev_com_vel, self._prev_ang_vel = state.com_vel.copy(), state.ang_vel_world.copy()
+        self._prev_joint_vel = state.joint_vel.copy()
+        return Accelerations(self._com_acc, self._ang_acc, joint_acc)
+
+    def _stability(self, state: SimulationState, acc: Accelerations) -> tuple[StabilityState, np.ndarray]:
+        """lambda's fields and the clipped margin (N,), one evaluation for the batch (lambda: :attr:`last_lambda`)."""
+        ext_force = self._push_force * (self._push_steps_left > 0)[:, None]
+        stability = stability_state_from_simulation(
+            state.base_rot,
+            state.com,
+            state.com_vel,
+            acc.com,
+            acc.base_angular,
+            ext_force,
+            np.zeros_like(ext_force),
+            state.feet,
+            self.mu,
+            state.contacts,
+            self.terrain.normal(state.feet[..., :2]),
+        )
+        lam = stability.to_lambda()
+        margin = np.clip(self._margin_fn(lam), *MARGIN_CLIP)
+        self._last_margin, self._last_lambda = margin, lam
+        return stability, margin
+
+    def _track_air_time(self, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Touchdowns (N, 4) and each touching-down foot's time in the air [s] (0 elsewhere).
+
+        Kept before the rewards so that a zero reward weight changes nothing.
+        """
+        touchdown = contacts & ~self._prev_contacts
+        self._air_time += self.dt
+        air_at_touchdown = np.where(touchdown, self._air_time, 0.0)
+        self._air_time = np.where(contacts, 0.0, self._air_time)
+        self._prev_contacts = contacts.copy()
+        return touchdown, air_at_touchdown
+
+    def _terminations(self, state: SimulationState, diverged: np.ndarray) -> np.ndarray:
+        """(N,) base or thigh contact with the terrain, base too low or too tilted, or a diverged simulation."""
+        bounds = self.config.termination
+        ground = self.terrain.height(state.base_pos[:, :2])
+        tilt_cos = state.base_rot[:, 2, 2]
+        return (
+            state.base_contact
+            | state.thigh_contacts.any(axis=1)
+            | (state.base_pos[:, 2] - ground < bounds.min_base_height)
+            | (tilt_cos < np.cos(bounds.max_tilt_rad))
+            | diverged
+        )
+
+    def _info(
+        self,
+        state: SimulationState,
+        values: dict[str, np.ndarray],
+        terms: dict[str, np.ndarray],
+        margin: np.ndarray,
+        stability: StabilityState,
+        terminated: np.ndarray,
+        diverged: np.ndarray,
+    ) -> dict[str, np.ndarray]:
+        """The per-environment step info (every weighted reward term, margin, accelerations, gait, flags)."""
+        R = state.base_rot
+        return {
+            **{f"reward_{k}": v for k, v in terms.items()},
+            "margin": margin,
+            "base_lin_acc": np.einsum("nji,nj->ni", R, self._com_acc),  # CoM acceleration, base frame
+            "base_ang_acc": np.einsum("nji,nj->ni", R, self._ang_acc),  # base frame
+            "base_lin_vel": values["base_lin_vel"],
+            "velocity_error": np.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
+            "contacts": state.contacts.astype(np.float64),
+            "stance_width": stance_width(stability.feet),  # feet in H, as they entered lambda
+            "fell": (terminated & ~diverged).astype(np.float64),
+            "diverged": diverged.astype(np.float64),
+        }
 
     def _apply_pushes(self) -> None:
         rnd = self.config.randomization
@@ -472,16 +449,16 @@ class AnymalCore:
         noise = self.config.randomization.observation_noise
         return assemble(values, POLICY_OBSERVATIONS, noise, self.rng)
 
-    def _policy_values(self, s: dict[str, np.ndarray], ids: np.ndarray | slice) -> dict[str, np.ndarray]:
+    def _policy_values(self, state: SimulationState, ids: np.ndarray | slice) -> dict[str, np.ndarray]:
         """The robot-state terms of the observation (and the rewards), from a state read of ``ids``."""
-        R = s["base_rot"]
+        R = state.base_rot
         return {
-            "base_lin_vel": np.einsum("nji,nj->ni", R, s["lin_vel_world"]),  # base frame
-            "base_ang_vel": s["ang_vel_body"],
+            "base_lin_vel": np.einsum("nji,nj->ni", R, state.lin_vel_world),  # base frame
+            "base_ang_vel": state.ang_vel_body,
             "projected_gravity": -R[:, 2, :],
             "command": self.command[ids],
-            "joint_pos": s["joint_pos"] - self._standing_joint_pos,
-            "joint_vel": s["joint_vel"],
+            "joint_pos": state.joint_pos - self._standing_joint_pos,
+            "joint_vel": state.joint_vel,
         }
 
     def observe_all(self) -> np.ndarray:

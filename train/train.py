@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.margin_kinds import MARGIN_KINDS
 from margin_rl.train.config import (
     BACKENDS,
     PPOConfig,
@@ -430,7 +431,7 @@ def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks:
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:
     """Options that shape the environment (shared with compare)."""
     parser.add_argument("--env", default=None, help=f"registered environment id (default {DEFAULT_ENV})")
-    parser.add_argument("--margin", choices=("learned", "analytic", "none"), help="margin used by the env (ANYmal)")
+    parser.add_argument("--margin", choices=tuple(MARGIN_KINDS), help="margin used by the env (ANYmal)")
     parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (ANYmal; default: bundled)")
     parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (ANYmal; default paper)")
     parser.add_argument(

@@ -1,0 +1,113 @@
+"""The margin kinds an ANYmal environment can put in its reward, declared once.
+
+``EnvConfig.margin`` names one of :data:`MARGIN_KINDS`; the core builds its batch margin function with
+:func:`make_margin_function`, and the training and evaluation CLIs offer the same names. Every kind maps
+lambda (N, 47) to a margin (N,) in its own unit; states for which a per-state criterion has no value
+(no equilibrium, no contact, an invalid lambda) get ``floor``, the lower end of the environment's clip.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from threadpoolctl import ThreadpoolController
+
+from margin_rl.robot import Robot
+from margin_rl.stability.analytic import analytic_margin
+from margin_rl.stability.fwp import fwp_feasibility
+from margin_rl.stability.learned import LearnedMargin
+
+MarginFunction = Callable[[np.ndarray], np.ndarray]
+"""lambda (N, 47) -> margin (N,)."""
+
+
+def check_margin_kind(name: object) -> str:
+    """``name`` if it is a margin kind, else a ValueError naming the kinds."""
+    if not isinstance(name, str) or name not in MARGIN_KINDS:
+        raise ValueError(f"margin must be one of {sorted(MARGIN_KINDS)}, got {name!r}")
+    return name
+
+
+def _per_state(criterion: Callable[[np.ndarray], float], floor: float) -> MarginFunction:
+    """A batch function from a per-state criterion; ``floor`` where it raises ValueError or is not finite."""
+
+    def evaluate(lam: np.ndarray) -> np.ndarray:
+        values = np.empty(len(lam))
+        for i, x in enumerate(lam):
+            try:
+                values[i] = criterion(x)
+            except ValueError:  # e.g. a diverged simulation's lambda
+                values[i] = np.nan
+        return np.where(np.isfinite(values), values, floor)
+
+    return evaluate
+
+
+def _no_margin(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
+    return lambda lam: np.zeros(len(lam))
+
+
+def _learned_margin(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
+    model = LearnedMargin.load(weights or robot.name)
+    # OpenBLAS threads even these small GEMMs; on a few cores they collide with MuJoCo's thread
+    # pool (measured 4x slower env steps), so the margin runs on one BLAS thread (~16 us to switch).
+    blas = ThreadpoolController()
+
+    def learned(lam: np.ndarray) -> np.ndarray:
+        with blas.limit(limits=1, user_api="blas"):
+            return np.asarray(model(lam))
+
+    return learned
+
+
+def _analytic_margin(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
+    return _per_state(lambda x: analytic_margin(robot, x).margin, floor)
+
+
+def _fwp_factor(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
+    return _per_state(lambda x: fwp_feasibility(robot, x).s, floor)
+
+
+@dataclass(frozen=True)
+class MarginKind:
+    """One margin kind: what it is, its unit, and how its batch function is built."""
+
+    name: str
+    description: str
+    unit: str
+    build: Callable[[Robot, str | None, float], MarginFunction]
+
+
+MARGIN_KINDS: dict[str, MarginKind] = {
+    kind.name: kind
+    for kind in (
+        MarginKind(
+            "learned", "the learned margin MLP of seed 000 §IV (batched, ~10 us per env step)", "m", _learned_margin
+        ),
+        MarginKind(
+            "analytic",
+            "the analytic margin of seed 000 §III (per env, ~2 ms per env step: validation)",
+            "m",
+            _analytic_margin,
+        ),
+        MarginKind(
+            "fwp",
+            "the feasible-wrench-polytope feasibility factor s of seed 004 (per env, ~4-12 ms per env step)",
+            "dimensionless (s <= 1, a relative depth in the wrench polytope)",
+            _fwp_factor,
+        ),
+        MarginKind("none", "no margin: the term is zero", "-", _no_margin),
+    )
+}
+"""Margin kinds by name (``EnvConfig.margin``, ``--margin``)."""
+
+
+def make_margin_function(kind: str, robot: Robot, weights: str | None, floor: float) -> MarginFunction:
+    """The batch margin function of ``kind`` for ``robot``.
+
+    ``weights``: learned-margin weights (.npz with its card) or None for the robot's bundled ones (only
+    used by ``"learned"``); ``floor``: the value of states that a per-state criterion cannot rate.
+    """
+    return MARGIN_KINDS[check_margin_kind(kind)].build(robot, weights, floor)

@@ -1,0 +1,45 @@
+"""The MuJoCo model of an environment: the robot's MJCF on flat ground or on a generated heightfield."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+
+from margin_rl.envs.terrain import Terrain, TerrainConfig
+from margin_rl.robot import Robot
+
+
+def build_model(robot: Robot, terrain: Terrain, terrain_config: TerrainConfig) -> mujoco.MjModel:
+    """The robot on its terrain: the flat scene file, or the robot plus a heightfield of ``terrain``.
+
+    The heightfield spans the terrain's grid centred on the world origin; its top is
+    ``terrain_config.max_height`` [m] and the floor geom keeps the name ``floor`` (friction 1.0) in both
+    cases, so the environment finds it by name.
+    """
+    if terrain.is_flat:
+        return mujoco.MjModel.from_xml_path(str(robot.scene_path))
+    h = terrain.heights
+    n = h.shape[0]
+    half = (n - 1) * terrain.resolution / 2
+    z_top = terrain_config.max_height
+    xml = f"""
+<mujoco model="{robot.name}_rough">
+  <include file="{Path(robot.xml_path).as_posix()}"/>
+  <visual><global offwidth="1280" offheight="720"/></visual>
+  <asset>
+    <hfield name="terrain" nrow="{n}" ncol="{n}" size="{half} {half} {z_top} 0.1"/>
+    <texture type="2d" name="grid" builtin="checker" rgb1="0.35 0.4 0.45" rgb2="0.25 0.3 0.35" width="300"
+             height="300"/>
+    <material name="grid" texture="grid" texrepeat="24 24"/>
+  </asset>
+  <worldbody>
+    <light pos="0 0 5" dir="0 0 -1" directional="true"/>
+    <geom name="floor" type="hfield" hfield="terrain" material="grid" contype="1" conaffinity="1" condim="3"
+          friction="1.0 0.005 0.0001" priority="1"/>
+  </worldbody>
+</mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    # MuJoCo hfield data: row-major, rows along y, columns along x, values in [0, 1] of z_top.
+    model.hfield_data[:] = (h / z_top).ravel()
+    return model

@@ -1,0 +1,73 @@
+"""lambda (seed 000 eq. 4) from world-frame simulator quantities: where the environments build it.
+
+Frames: W is the world; H, the horizontal frame, has W's z axis and the yaw of the base heading (the
+base x axis projected on the ground). lambda holds e_g, the third row of the base orientation R_WB,
+and every other vector in H, the feet relative to the CoM. Accelerations: the environment passes the
+CoM acceleration and the base angular acceleration as finite differences of the CoM velocity (subtree
+sensor) and of the base angular velocity (world frame) over the 20 ms policy step, i.e. the mean
+acceleration over the step (optionally smoothed by ``EnvConfig.acceleration_filter``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from margin_rl.stability.lambda_state import StabilityState
+
+
+def heading_rotation(base_rotation: np.ndarray) -> np.ndarray:
+    """Rotation R_WH (..., 3, 3) of the horizontal frame H in the world: the yaw of the base x axis."""
+    yaw = np.arctan2(base_rotation[..., 1, 0], base_rotation[..., 0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    zero, one = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1), np.stack([zero, zero, one], -1)], -2)
+
+
+def stability_state_from_simulation(
+    base_rotation: np.ndarray,
+    com: np.ndarray,
+    com_vel: np.ndarray,
+    com_acc: np.ndarray,
+    base_ang_acc: np.ndarray,
+    ext_force: np.ndarray,
+    ext_torque: np.ndarray,
+    feet: np.ndarray,
+    mu: np.ndarray,
+    contacts: np.ndarray,
+    normals: np.ndarray,
+) -> StabilityState:
+    """lambda's fields (N, ...) from world-frame simulator quantities (all (N, ...), world frame, SI units).
+
+    e_g is the third row of the base rotation R_WB; every other vector v is rotated into H as
+    R_WH^T v, and the feet are taken relative to the CoM first.
+    """
+    R_wh = heading_rotation(base_rotation)
+
+    def to_h(v: np.ndarray) -> np.ndarray:  # world -> H for (N, 3) or (N, k, 3)
+        return np.einsum("nji,n...j->n...i", R_wh, v)
+
+    return StabilityState(
+        gravity_axis=base_rotation[:, 2, :],
+        com_vel=to_h(com_vel),
+        com_acc=to_h(com_acc),
+        base_ang_acc=to_h(base_ang_acc),
+        ext_force=to_h(ext_force),
+        ext_torque=to_h(ext_torque),
+        feet=to_h(feet - com[:, None, :]),
+        mu=np.asarray(mu, dtype=float),
+        contacts=np.asarray(contacts, dtype=float),
+        normals=to_h(normals),
+    )
+
+
+def lambda_from_simulation(*args: np.ndarray, **kwargs: np.ndarray) -> np.ndarray:
+    """lambda (N, 47) from the arguments of :func:`stability_state_from_simulation`."""
+    return stability_state_from_simulation(*args, **kwargs).to_lambda()
+
+
+def stance_width(feet_h: np.ndarray) -> np.ndarray:
+    """Mean lateral distance [m] between the left and right foot of the front and of the hind pair.
+
+    ``feet_h`` (N, 4, 3): feet in H (LF, RF, LH, RH), e.g. :attr:`StabilityState.feet`.
+    """
+    return 0.5 * (np.abs(feet_h[:, 0, 1] - feet_h[:, 1, 1]) + np.abs(feet_h[:, 2, 1] - feet_h[:, 3, 1]))

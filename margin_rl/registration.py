@@ -1,0 +1,61 @@
+"""The Gymnasium ids of margin_rl, registered by name only: nothing of ``margin_rl.envs`` is imported here.
+
+``import margin_rl`` calls :func:`register_envs`; Gymnasium imports an environment's module the first time
+it is made (the entry points are strings), so the package root stays below the environment layer. In a
+fresh interpreter without ``import margin_rl``, ``gymnasium.make("margin_rl:margin_rl/AnymalB-v0")`` imports
+the package through Gymnasium's ``module:id`` syntax (Gymnasium 1.x has no plugin entry points).
+
+Ids: ``margin_rl/AnymalB-v0``, ``margin_rl/AnymalC-v0`` (flat ground), ``margin_rl/AnymalB-Rough-v0``,
+``margin_rl/AnymalC-Rough-v0`` (rough terrain), each with a native batched vector entry point for
+``gymnasium.make_vec``; ``margin_rl/SLIPHopper-v0`` (seed 001's actuated SLIP hopper, one hop per step).
+"""
+
+from __future__ import annotations
+
+import gymnasium
+
+EPISODE_STEPS = 1000
+"""20 s at the 50 Hz policy rate (EnvConfig.episode_length_s / (MJCF timestep x decimation); tested)."""
+
+ANYMAL_ENV_IDS: dict[str, dict[str, str]] = {
+    "margin_rl/AnymalB-v0": {"robot": "anymal_b", "terrain": "flat"},
+    "margin_rl/AnymalC-v0": {"robot": "anymal_c", "terrain": "flat"},
+    "margin_rl/AnymalB-Rough-v0": {"robot": "anymal_b", "terrain": "rough"},
+    "margin_rl/AnymalC-Rough-v0": {"robot": "anymal_c", "terrain": "rough"},
+}
+"""ANYmal ids and the constructor keywords that make each one."""
+
+SLIP_HOPPER_ENV_ID = "margin_rl/SLIPHopper-v0"
+SLIP_HOPPER_EPISODE_HOPS = 50
+"""Episode length of ``margin_rl/SLIPHopper-v0`` in hops (one step = one apex-to-apex hop)."""
+
+
+def register_envs() -> None:
+    """Register the ANYmal ids (idempotent)."""
+    for env_id, kwargs in ANYMAL_ENV_IDS.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point="margin_rl.envs.anymal:AnymalEnv",
+            vector_entry_point="margin_rl.envs.vector:AnymalVectorEnv",
+            max_episode_steps=EPISODE_STEPS,
+            kwargs=dict(kwargs),
+        )
+
+
+def register_slip_envs() -> None:
+    """Register ``margin_rl/SLIPHopper-v0`` (aSLIP apex velocity tracking, :mod:`margin_rl.envs.slip_hopper`)."""
+    if SLIP_HOPPER_ENV_ID in gymnasium.registry:
+        return
+    gymnasium.register(
+        id=SLIP_HOPPER_ENV_ID,
+        entry_point="margin_rl.envs.slip_hopper:SlipHopperEnv",
+        max_episode_steps=SLIP_HOPPER_EPISODE_HOPS,
+    )
+
+
+def register_all() -> None:
+    """Register every id of the package (idempotent)."""
+    register_envs()
+    register_slip_envs()

@@ -1,0 +1,179 @@
+"""The package's layers import in one direction only: robot -> stability -> envs -> train, planning on top.
+
+Every ``import`` and ``from ... import`` of every module (at the top or inside a function) is read with
+``ast`` and checked against :data:`ALLOWED`; the environments never import SB3 or rsl-rl, and the stability
+core (the robot-agnostic criteria) never imports the robot layer.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SOURCE_FOLDERS = {"margin_rl": "margin_rl", "envs": "margin_rl.envs", "train": "margin_rl.train"}
+"""Repository folder -> the package it is installed as (pyproject's package-dir)."""
+
+BASE_MODULES = ("margin_rl.atomic", "margin_rl.provenance", "margin_rl.registration")
+
+
+def layer_of(module: str) -> str:
+    """The layer of a first-party module name."""
+    if module in BASE_MODULES:
+        return "base"
+    if module == "margin_rl.dataset":  # the deprecated home of the stability dataset
+        return "stability"
+    parts = module.split(".")
+    if len(parts) == 1 or parts[1] in ("robot", "__main__"):
+        return "robot"  # the package's face loads the robot layer only
+    if parts[1] in ("stability", "slip", "planning", "envs", "train"):
+        return parts[1]
+    raise AssertionError(f"{module}: no layer declared; add it to tests/test_layers.py")
+
+
+ALLOWED: dict[str, set[str]] = {
+    "base": {"base"},
+    "robot": {"base", "robot"},
+    "stability": {"base", "robot", "stability"},
+    "slip": {"base", "slip"},
+    "planning": {"base", "robot", "stability", "envs", "planning"},  # envs: the rough terrain's height field
+    "envs": {"base", "robot", "stability", "slip", "envs"},
+    "train": {"base", "robot", "stability", "slip", "envs", "train"},
+}
+"""Layer -> the layers its modules may import."""
+
+FORBIDDEN_THIRD_PARTY = {"envs": ("stable_baselines3", "rsl_rl"), "stability": ("gymnasium",), "robot": ("torch",)}
+ROBOT_AGNOSTIC = ("contact", "polygon", "projection", "region", "icp")
+"""Modules of margin_rl.stability that hold the robot-agnostic criteria."""
+
+
+def source_modules() -> dict[str, Path]:
+    modules = {}
+    for folder, package in SOURCE_FOLDERS.items():
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            relative = path.relative_to(ROOT / folder).with_suffix("")
+            parts = [p for p in relative.parts if p != "__init__"]
+            modules[".".join([package, *parts])] = path
+    return modules
+
+
+def imported_names(path: Path, module: str) -> list[tuple[int, str]]:
+    """(line, absolute module name) of every import in ``path``, at the top or inside a function."""
+    is_package = path.name == "__init__.py"
+    names = []
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split(".")
+                base = base if is_package else base[:-1]
+                base = base[: len(base) - node.level + 1]
+                target = ".".join([*base, node.module] if node.module else base)
+            else:
+                target = node.module or ""
+            names.append((node.lineno, target))
+            # `from margin_rl import envs` or `from margin_rl.stability import region` imports a module
+            names += [(node.lineno, f"{target}.{alias.name}") for alias in node.names]
+    return names
+
+
+MODULES = source_modules()
+
+
+def test_every_module_has_a_layer() -> None:
+    assert len(MODULES) > 50
+    for module in MODULES:
+        layer_of(module)
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_imports_follow_the_layers(module: str) -> None:
+    layer = layer_of(module)
+    wrong = []
+    for line, target in imported_names(MODULES[module], module):
+        top = target.split(".")[0]
+        if top == "margin_rl":
+            if target not in MODULES:
+                continue  # a name imported from a module, e.g. `from margin_rl import load_robot`
+            if layer_of(target) not in ALLOWED[layer]:
+                wrong.append(f"line {line}: {target} ({layer_of(target)} layer)")
+        elif top in FORBIDDEN_THIRD_PARTY.get(layer, ()):
+            wrong.append(f"line {line}: {target} (third party, never in the {layer} layer)")
+        if layer == "stability" and module.split(".")[-1] in ROBOT_AGNOSTIC and target.startswith("margin_rl.robot"):
+            wrong.append(f"line {line}: {target} (the stability core is robot-agnostic)")
+    assert not wrong, f"{module} ({layer} layer) imports against the layer order:\n" + "\n".join(wrong)
+
+
+def test_the_checker_catches_an_upward_import(tmp_path: Path) -> None:
+    """The walk sees imports inside functions and relative imports (a check that cannot pass vacuously)."""
+    path = tmp_path / "mod.py"
+    path.write_text("def f():\n    from ..envs import core\n    import margin_rl.train.train\n")
+    targets = [t for _, t in imported_names(path, "margin_rl.stability.mod")]
+    assert targets == ["margin_rl.envs", "margin_rl.envs.core", "margin_rl.train.train"]
+    assert {layer_of(t) for t in targets} - ALLOWED["stability"] == {"envs", "train"}
+
+
+def test_the_package_root_does_not_import_the_environments() -> None:
+    """``import margin_rl`` registers the ids by name; the env modules load when an env is made."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, gymnasium as gym, margin_rl\n"
+        "assert 'margin_rl.envs' not in sys.modules, 'import margin_rl imported margin_rl.envs'\n"
+        "assert 'margin_rl/AnymalB-v0' in gym.registry and 'margin_rl/SLIPHopper-v0' in gym.registry\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+def test_a_fresh_interpreter_makes_an_env_through_the_module_syntax() -> None:
+    """Without ``import margin_rl``: Gymnasium's ``module:id`` syntax imports the package, which registers."""
+    import subprocess
+    import sys
+
+    code = (
+        "import gymnasium as gym\n"
+        "env = gym.make('margin_rl:margin_rl/AnymalB-v0', margin='none')\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "assert obs.shape == (48,)\n"
+        "vec = gym.make_vec('margin_rl/AnymalC-v0', num_envs=2, margin='none')\n"
+        "assert vec.reset(seed=0)[0].shape == (2, 48)\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+def first_party_imports(module: str) -> set[str]:
+    """First-party modules that ``module`` imports, at load time or inside a function."""
+    targets = set()
+    for _, target in imported_names(MODULES[module], module):
+        while target and target not in MODULES:  # `from package import name` names a module or a name
+            target = target.rpartition(".")[0]
+        if target and target != module:
+            targets.add(target)
+    return targets
+
+
+def test_no_module_imports_itself_in_a_circle() -> None:
+    graph = {module: first_party_imports(module) for module in MODULES}
+    cycles = []
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+
+    def visit(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph[node]):
+            # a package's face importing its own submodules (and they importing the face's parents) is normal
+            if node.startswith(nxt + ".") or nxt.startswith(node + "."):
+                continue
+            if state.get(nxt) == 1:
+                cycles.append(" -> ".join([*path[path.index(nxt) :], nxt]))
+            elif nxt not in state:
+                visit(nxt, [*path, nxt])
+        state[node] = 2
+
+    for module in sorted(graph):
+        if module not in state:
+            visit(module, [module])
+    assert not cycles, "modules that import each other (at load time or lazily):\n" + "\n".join(cycles)

@@ -24,7 +24,7 @@ import time
 import numpy as np
 import torch
 
-from margin_rl.dataset import load_dataset
+from margin_rl.stability.dataset import load_dataset
 from margin_rl.stability.lambda_state import LAMBDA_DIM
 from margin_rl.stability.training import TrainConfig, build_model, check_config, fit, mean_squared_error, split_indices
 

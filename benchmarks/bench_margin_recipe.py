@@ -23,7 +23,7 @@ import time
 import numpy as np
 import torch
 
-from margin_rl.dataset import load_dataset
+from margin_rl.stability.dataset import load_dataset
 from margin_rl.stability.training import TrainConfig, build_model, check_config, fit, split_indices, training_split
 
 

@@ -1,336 +1,45 @@
-"""Analytic-margin datasets: Table I states labelled with m_a, in resumable shards.
+"""Deprecated home of the analytic-margin datasets: use :mod:`margin_rl.stability.dataset`.
 
-Command line::
-
-    python -m margin_rl.dataset generate --robot anymal_c --n 1000000 --out data/anymal_c [--workers 2]
-    python -m margin_rl.dataset generate ... --ray auto          # the same tasks on a Ray cluster
-    python -m margin_rl.dataset summary data/anymal_c
-
-Layout of a dataset directory::
-
-    manifest.json        robot, sampler version, seed, package version, analytic settings, shard size
-    shard_00000.npz      lam (k, 47) float32, margin (k,) float32 [m] (NaN unless ok),
-                         status (k,) int8 (index into STATUSES), n_lps (k,) int16, seconds (k,) float32
-
-Every shard is an independent task with its own seed (``SeedSequence(seed, spawn_key=(shard,))``), so
-the dataset does not depend on the number of workers or on the order shards finish. A shard is
-written to a temporary file and renamed into place, so a killed run loses at most the shards in
-flight; rerunning the same command skips finished shards. A directory made with other settings is
-refused rather than mixed.
+The dataset is part of the stability layer (as :mod:`margin_rl.slip.dataset` is of the SLIP one); this
+module re-exports its public names and warns on import. ``python -m margin_rl.dataset ...`` still runs
+the same command line.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
-import shlex
-import sys
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
-from pathlib import Path
+import warnings
 
-import numpy as np
+from margin_rl.stability.dataset import (
+    FORMAT_VERSION,
+    MANIFEST,
+    Dataset,
+    DatasetError,
+    DatasetSpec,
+    generate,
+    load_dataset,
+    main,
+    make_shard,
+    shard_path,
+)
 
-from margin_rl.atomic import atomic_savez, atomic_write_text
-from margin_rl.robot import available_robots
-from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch, worker_robot
-from margin_rl.stability.lambda_state import LAMBDA_DIM
-from margin_rl.stability.sampling import SAMPLER_VERSION, sample_states
+__all__ = [
+    "FORMAT_VERSION",
+    "MANIFEST",
+    "Dataset",
+    "DatasetError",
+    "DatasetSpec",
+    "generate",
+    "load_dataset",
+    "main",
+    "make_shard",
+    "shard_path",
+]
 
-MANIFEST = "manifest.json"
-FORMAT_VERSION = 1
-
-
-class DatasetError(ValueError):
-    """A dataset directory or request that cannot be used as asked."""
-
-
-@dataclass(frozen=True)
-class DatasetSpec:
-    """What defines a dataset; two runs with equal specs produce identical shards."""
-
-    robot: str
-    n: int
-    shard_size: int
-    seed: int
-    settings: AnalyticSettings
-
-    @property
-    def n_shards(self) -> int:
-        return -(-self.n // self.shard_size)
-
-    def shard_length(self, index: int) -> int:
-        return min(self.shard_size, self.n - index * self.shard_size)
-
-    def command(self, out: str | Path) -> str:
-        """The command line that generates this dataset into ``out``."""
-        friction = self.settings.friction
-        friction_arg = friction if isinstance(friction, str) else f"{friction[0]}:{friction[1]}"
-        return (
-            f"python -m margin_rl.dataset generate --robot {self.robot} --n {self.n} --out {shlex.quote(str(out))} "
-            f"--seed {self.seed} --shard-size {self.shard_size} --friction {friction_arg} "
-            f"--focus-tol {self.settings.focus_tol}"
-        )
-
-    def identity(self) -> dict[str, object]:
-        """The fields that must match to resume or extend a directory (n may grow)."""
-        return {
-            "format_version": FORMAT_VERSION,
-            "robot": self.robot,
-            "sampler_version": SAMPLER_VERSION,
-            "seed": self.seed,
-            "shard_size": self.shard_size,
-            "analytic_settings": self.settings.as_dict(),
-        }
-
-
-def shard_path(out: Path, index: int) -> Path:
-    return out / f"shard_{index:05d}.npz"
-
-
-def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
-    """Sample, label and write shard ``index``; returns its status counts. Runs in a worker."""
-    robot = worker_robot(spec.robot)
-    seed = np.random.SeedSequence(spec.seed, spawn_key=(index,))
-    lams = sample_states(robot, spec.shard_length(index), seed=seed)
-    labels = analytic_margin_batch(spec.robot, lams, spec.settings, workers=1)
-    atomic_savez(
-        shard_path(out, index),
-        lam=lams.astype(np.float32),
-        margin=labels.margin.astype(np.float32),
-        status=labels.status,
-        n_lps=labels.n_lps,
-        seconds=labels.seconds.astype(np.float32),
-    )
-    return labels.counts()
-
-
-def _shard_is_complete(path: Path, length: int) -> bool:
-    if not path.is_file():
-        return False
-    try:
-        with np.load(path) as data:
-            return data["lam"].shape == (length, LAMBDA_DIM) and data["status"].shape == (length,)
-    except Exception:  # a truncated or foreign file: regenerate it
-        return False
-
-
-def _prepare(spec: DatasetSpec, out: Path, command: str) -> list[int]:
-    """Create or check the manifest; return the shards still to do."""
-    out.mkdir(parents=True, exist_ok=True)
-    manifest_path = out / MANIFEST
-    identity = spec.identity()
-    if manifest_path.is_file():
-        old = json.loads(manifest_path.read_text())
-        mismatched = [k for k, v in identity.items() if old.get(k) != v]
-        if mismatched:
-            details = "; ".join(f"{k}: {old.get(k)!r} there, {identity[k]!r} asked" for k in mismatched)
-            raise DatasetError(f"{out} holds a dataset with other settings ({details}); use another --out")
-        if spec.n < old.get("n", 0):
-            # A smaller n would rewrite its last shard shorter and orphan the rest.
-            raise DatasetError(f"{out} already holds n={old['n']} samples; ask for at least that many to resume")
-        # A larger n extends the dataset: a partial last shard is regenerated at full length from its
-        # own seed, and new shards are added.
-    from margin_rl import __version__
-
-    manifest = {
-        **identity,
-        "n": spec.n,
-        "n_shards": spec.n_shards,
-        "package_version": __version__,
-        "statuses": list(STATUSES),
-        "fields": {
-            "lam": f"(k, {LAMBDA_DIM}) float32, layout margin_rl.stability.LAMBDA_FIELDS",
-            "margin": "(k,) float32 analytic margin m_a [m], NaN unless status is ok",
-            "status": "(k,) int8 index into statuses",
-            "n_lps": "(k,) int16 conic programs solved",
-            "seconds": "(k,) float32 wall time of the analytic margin",
-        },
-        "command": command,
-    }
-    atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")
-    return [i for i in range(spec.n_shards) if not _shard_is_complete(shard_path(out, i), spec.shard_length(i))]
-
-
-def _local_tasks(spec: DatasetSpec, todo: Sequence[int], out: Path, workers: int) -> Iterator[tuple[int, dict]]:
-    if workers == 1:
-        for i in todo:
-            yield i, make_shard(spec, i, out)
-        return
-    import multiprocessing
-
-    with multiprocessing.get_context("fork").Pool(workers) as pool:
-        # imap_unordered: a shard's result arrives as soon as it is written, whatever the order.
-        yield from pool.imap_unordered(_make_shard_star, [(spec, i, out) for i in todo])
-
-
-def _make_shard_star(args: tuple[DatasetSpec, int, Path]) -> tuple[int, dict[str, int]]:
-    spec, index, out = args
-    return index, make_shard(spec, index, out)
-
-
-def _ray_tasks(spec: DatasetSpec, todo: Sequence[int], out: Path, address: str) -> Iterator[tuple[int, dict]]:
-    try:
-        import ray
-    except ImportError as exc:
-        raise DatasetError("--ray needs Ray: pip install 'margin_rl[ray]'") from exc
-    started = not ray.is_initialized()
-    if started:
-        ray.init(address=None if address == "local" else address, ignore_reinit_error=True, log_to_driver=False)
-    try:
-        remote = ray.remote(_make_shard_star)
-        # Shards are written by the workers to `out`, which must be a shared path on a real cluster.
-        pending = {remote.remote((spec, i, out)): i for i in todo}
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            for ref in done:
-                pending.pop(ref)
-                yield ray.get(ref)
-    finally:
-        if started:
-            ray.shutdown()
-
-
-def generate(
-    spec: DatasetSpec,
-    out: str | Path,
-    workers: int | None = None,
-    ray_address: str | None = None,
-    progress: bool = True,
-    command: str = "",
-) -> dict[str, int]:
-    """Generate (or finish) a dataset; returns the status counts of the shards made in this call."""
-    out = Path(out)
-    if spec.robot not in available_robots():
-        raise DatasetError(f"unknown robot {spec.robot!r}; available robots: {', '.join(available_robots())}")
-    if spec.n <= 0 or spec.shard_size <= 0:
-        raise DatasetError(f"n and shard size must be positive, got n={spec.n}, shard size={spec.shard_size}")
-    todo = _prepare(spec, out, command or spec.command(out))
-    workers = (os.cpu_count() or 1) if workers is None else workers
-    if workers < 1:
-        raise DatasetError(f"workers must be >= 1, got {workers}")
-    total_todo = sum(spec.shard_length(i) for i in todo)
-    counts = dict.fromkeys(STATUSES, 0)
-    skipped = spec.n_shards - len(todo)
-    if not todo:
-        _log(progress, f"{out}: all {spec.n_shards} shards already present")
-        return counts
-    _log(progress, f"{out}: {len(todo)} shards to make ({total_todo} samples), {skipped} already present")
-    tasks: Iterable[tuple[int, dict]] = (
-        _ray_tasks(spec, todo, out, ray_address) if ray_address else _local_tasks(spec, todo, out, workers)
-    )
-    bar = _progress_bar(total_todo, progress)
-    for index, shard_counts in tasks:
-        for k, v in shard_counts.items():
-            counts[k] += v
-        bar.update(spec.shard_length(index))
-        bar.set_postfix(ok=f"{counts['ok'] / max(1, sum(counts.values())):.0%}")
-    bar.close()
-    _log(progress, "status counts: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-    return counts
-
-
-def _progress_bar(total: int, enabled: bool):
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="sample", unit_scale=True, smoothing=0.05, disable=not enabled, file=sys.stderr)
-
-
-def _log(enabled: bool, message: str) -> None:
-    if enabled:
-        print(message, file=sys.stderr, flush=True)
-
-
-@dataclass(frozen=True)
-class Dataset:
-    """Samples with status ``ok`` of a dataset directory, plus what was excluded."""
-
-    lam: np.ndarray  # (N, 47) float32
-    margin: np.ndarray  # (N,) float32 [m]
-    counts: dict[str, int]  # status counts over all loaded shards
-    manifest: dict[str, object]
-
-
-def load_dataset(path: str | Path, max_samples: int | None = None) -> Dataset:
-    """Load the ``ok`` samples of a dataset directory (non-ok samples are counted, not returned)."""
-    path = Path(path)
-    manifest_path = path / MANIFEST
-    if not manifest_path.is_file():
-        raise DatasetError(f"{path} is not a margin_rl dataset (no {MANIFEST})")
-    manifest = json.loads(manifest_path.read_text())
-    lams, margins = [], []
-    counts = dict.fromkeys(manifest.get("statuses", STATUSES), 0)
-    n_loaded = 0
-    for shard in sorted(path.glob("shard_*.npz")):
-        with np.load(shard) as data:
-            status = data["status"]
-            ok = status == STATUSES.index("ok")
-            for i, name in enumerate(STATUSES):
-                counts[name] += int(np.sum(status == i))
-            lams.append(data["lam"][ok])
-            margins.append(data["margin"][ok])
-            n_loaded += int(ok.sum())
-        if max_samples is not None and n_loaded >= max_samples:
-            break
-    if not lams:
-        raise DatasetError(f"{path} has no shards yet")
-    lam, margin = np.concatenate(lams), np.concatenate(margins)
-    if max_samples is not None:
-        lam, margin = lam[:max_samples], margin[:max_samples]
-    return Dataset(lam=lam, margin=margin, counts=counts, manifest=manifest)
-
-
-def _parse_friction(text: str) -> str | tuple[str, int]:
-    if text == "cone":
-        return "cone"
-    if text.startswith("pyramid:"):
-        return ("pyramid", int(text.split(":", 1)[1]))
-    raise argparse.ArgumentTypeError(f"friction must be 'cone' or 'pyramid:K', got {text!r}")
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m margin_rl.dataset", description=__doc__.split("\n\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-    gen = sub.add_parser("generate", help="generate or resume a dataset")
-    gen.add_argument("--robot", required=True, choices=available_robots())
-    gen.add_argument("--n", type=int, required=True, help="number of samples")
-    gen.add_argument("--out", required=True, help="dataset directory")
-    gen.add_argument("--seed", type=int, default=0)
-    gen.add_argument("--shard-size", type=int, default=5000)
-    gen.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
-    gen.add_argument("--ray", default=None, metavar="ADDRESS", help="run on Ray: 'auto', 'local' or an address")
-    gen.add_argument("--friction", type=_parse_friction, default="cone", help="'cone' or 'pyramid:K'")
-    gen.add_argument("--focus-tol", type=float, default=AnalyticSettings().focus_tol, help="margin bracket [m]")
-    gen.add_argument("--quiet", action="store_true")
-    summ = sub.add_parser("summary", help="print the manifest and status counts of a dataset")
-    summ.add_argument("path")
-    args = parser.parse_args(argv)
-
-    if args.command == "summary":
-        ds = load_dataset(args.path)
-        print(json.dumps({k: v for k, v in ds.manifest.items() if k != "fields"}, indent=2))
-        total = sum(ds.counts.values())
-        print(f"{total} samples: " + ", ".join(f"{k} {v} ({v / max(total, 1):.1%})" for k, v in ds.counts.items()))
-        if len(ds.margin):
-            m = ds.margin
-            print(f"ok margins [m]: mean {m.mean():.4f}, std {m.std():.4f}, stable (m >= 0) {np.mean(m >= 0):.1%}")
-        return 0
-
-    spec = DatasetSpec(
-        robot=args.robot,
-        n=args.n,
-        shard_size=args.shard_size,
-        seed=args.seed,
-        settings=AnalyticSettings(friction=args.friction, focus_tol=args.focus_tol),
-    )
-    command = "python -m margin_rl.dataset " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
-    try:
-        generate(spec, args.out, workers=args.workers, ray_address=args.ray, progress=not args.quiet, command=command)
-    except DatasetError as exc:
-        parser.error(str(exc))
-    return 0
-
+warnings.warn(
+    "margin_rl.dataset is deprecated: import margin_rl.stability.dataset (python -m margin_rl.stability.dataset)",
+    DeprecationWarning,
+    stacklevel=2,
+)
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -1,20 +1,25 @@
-"""Stability layer: the analytic stability margin of seed 000 §III (and, later, the learned one).
+"""Stability layer: the analytic stability margin of seed 000 §III, the learned one (§IV) and the FWP factor.
 
-Robot-agnostic core::
+Robot-agnostic core (arrays in, arrays out; never imports margin_rl.robot)::
 
-    feasible_region(feet, normals, stance, mu, mass, jacobians, torque_limits, ...)  -> FeasibleRegion
-    capture_point(com_xy, com_vel_xy, com_height, g)                                  -> ICP, eq. (5)
-    stability_margin(region, point)                                                   -> eq. (7)
+    contact      the contact problem both criteria share: ContactSet, LegLimits, CentroidalLoad, the input
+                 checks, tangent bases, the gravito-inertial wrench, the Clarabel settings and statuses
+    polygon      planar convex polygons: caps, hull, area, half-spaces (eq. 6)
+    projection   iterative_projection: one loop of Alg. 1, stopping on the area or on a focus point's bracket
+    region       feasible_region(...) / solve_region(contacts, legs, load) -> FeasibleRegion (conic program)
+    icp          capture_point (eq. 5), stability_margin (eq. 7)
 
 Robot layer (lambda in R^47, eq. 4)::
 
-    LAMBDA_FIELDS, StabilityState, from_lambda       one declaration of lambda's layout
-    sample_states(robot, n, seed)                    the Table I sampler
-    analytic_margin(robot, lam)                      lambda -> IK -> region -> ICP -> m_a
-    analytic_margin_batch(robot_name, lams)          the same over local processes
-    LearnedMargin.load(robot)                        the learned margin (value, gradient, torch, ONNX)
-    evaluation.evaluate(robot_name, model)           the learned margin judged by the paper's protocol
-    fwp_feasibility(robot, lam)                      the feasible-wrench-polytope factor s (seed 004)
+    lambda_state     LAMBDA_FIELDS, StabilityState, from_lambda: one declaration of lambda's layout
+    sampling         sample_states(robot, n, seed): the Table I sampler
+    analytic         analytic_margin(robot, lam): lambda -> IK -> region -> ICP -> m_a (and a batch version)
+    fwp              fwp_feasibility(robot, lam): the feasible-wrench-polytope factor s (seed 004)
+    dataset          Table I states labelled with m_a, in resumable shards (python -m margin_rl.stability.dataset)
+    mlp_weights      the learned margin's architecture, weights and their files (no torch)
+    learned          LearnedMargin.load(robot): value, gradient, torch module, ONNX
+    margin_mlp       the network as a torch module (training, differentiable use)
+    training         fit the learned margin on a dataset; evaluation: the paper's protocol; figures
 """
 
 from margin_rl.stability.analytic import (
@@ -25,6 +30,7 @@ from margin_rl.stability.analytic import (
     analytic_margin,
     analytic_margin_batch,
 )
+from margin_rl.stability.contact import CentroidalLoad, ContactSet, LegLimits
 from margin_rl.stability.fwp import FWPFeasibility, feasible_wrench_polytope, fwp_feasibility
 from margin_rl.stability.icp import capture_point, stability_margin
 from margin_rl.stability.lambda_state import (
@@ -36,7 +42,7 @@ from margin_rl.stability.lambda_state import (
     lambda_names,
 )
 from margin_rl.stability.learned import LearnedMargin
-from margin_rl.stability.region import FeasibleRegion, feasible_region
+from margin_rl.stability.region import FeasibleRegion, RegionSettings, feasible_region, solve_region
 from margin_rl.stability.sampling import SAMPLER_VERSION, TableI, sample_states
 
 __all__ = [
@@ -48,9 +54,13 @@ __all__ = [
     "AnalyticMarginResult",
     "AnalyticSettings",
     "BatchMargins",
+    "CentroidalLoad",
+    "ContactSet",
     "FWPFeasibility",
     "FeasibleRegion",
     "LearnedMargin",
+    "LegLimits",
+    "RegionSettings",
     "StabilityState",
     "TableI",
     "analytic_margin",
@@ -62,5 +72,6 @@ __all__ = [
     "fwp_feasibility",
     "lambda_names",
     "sample_states",
+    "solve_region",
     "stability_margin",
 ]

@@ -14,7 +14,7 @@ Pipeline of :func:`analytic_margin` (frames as in :mod:`margin_rl.stability.lamb
    joint or base angular velocities; see Table I: "base angular velocity: -").
 4. Contact points p_i - r n_i of the stance feet (sphere radius r), the CoM height above them
    (mean over the stance feet, for the LIP frequency omega = sqrt(g / z)), and the Feasible Region
-   (:func:`~margin_rl.stability.region.feasible_region`) with the robot's torque limits.
+   (:func:`~margin_rl.stability.region.solve_region`) with the robot's torque limits.
 5. ICP xi = c_dot_xy / omega relative to the current CoM (eq. 5), and the margin. Only the margin at
    xi is needed, so by default the projection is *focused* on xi: the inner and outer
    approximations bracket its signed distance and the loop stops when the bracket is narrower than
@@ -47,6 +47,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from margin_rl.robot import Robot, load_robot
+from margin_rl.stability.contact import DEFAULT_CONTACT_TORQUE_LIMIT, CentroidalLoad, ContactSet, LegLimits
 from margin_rl.stability.icp import stability_margin
 from margin_rl.stability.lambda_state import (
     LAMBDA_DIM,
@@ -54,15 +55,8 @@ from margin_rl.stability.lambda_state import (
     check_lambda,
     from_lambda,
 )
-from margin_rl.stability.region import (
-    DEFAULT_CONTACT_TORQUE_LIMIT,
-    DEFAULT_FOCUS_TOL,
-    DEFAULT_MAX_LPS,
-    DEFAULT_TOL,
-    FeasibleRegion,
-    feasible_region,
-    gravito_inertial_wrench,
-)
+from margin_rl.stability.projection import DEFAULT_FOCUS_TOL, DEFAULT_MAX_LPS, DEFAULT_TOL
+from margin_rl.stability.region import FeasibleRegion, RegionSettings, solve_region
 
 STATUSES: tuple[str, ...] = ("ok", "unreachable", "infeasible", "no_contact", "solver_error")
 """Status names; batch results store their index in this tuple (``STATUSES.index("ok") == 0``)."""
@@ -176,11 +170,25 @@ class ContactProblem:
     joint_pos: np.ndarray  # (12,) [rad]
     base_rotation: np.ndarray  # (3, 3) R_HB
 
-    def gravito_inertial_wrench(self) -> np.ndarray:
-        """(6,) wrench [N, N m] the contacts must produce, about the CoM in H (seed 004 eq. 14-15)."""
-        return gravito_inertial_wrench(
+    def contact_set(
+        self, friction: str | tuple[str, int] = "cone", contact_torque_limit: float = DEFAULT_CONTACT_TORQUE_LIMIT
+    ) -> ContactSet:
+        """The contacts (points, normals, stance, mu) with a friction model and w_M of eq. (3)."""
+        return ContactSet(self.contact_points, self.normals, self.stance, self.mu, friction, contact_torque_limit)
+
+    def leg_limits(self) -> LegLimits:
+        """The legs' Jacobians, symmetric torque limits and bias torques."""
+        return LegLimits(self.jacobians, self.torque_limits, self.leg_bias)
+
+    def load(self) -> CentroidalLoad:
+        """Mass, CoM acceleration, angular-momentum rate, external wrench and gravity."""
+        return CentroidalLoad(
             self.mass, self.com_acc, self.ang_momentum_rate, self.ext_force, self.ext_torque, self.gravity
         )
+
+    def gravito_inertial_wrench(self) -> np.ndarray:
+        """(6,) wrench [N, N m] the contacts must produce, about the CoM in H (seed 004 eq. 14-15)."""
+        return self.load().wrench()
 
 
 def contact_problem(
@@ -278,26 +286,13 @@ def analytic_margin(robot: Robot, lam: np.ndarray, settings: AnalyticSettings | 
 
     # 4. Feasible region of the CoM over the stance contact points, focused on the ICP (step 5).
     icp = problem.capture_point
-    focus = {} if s.focus_tol is None else {"focus": icp, "focus_tol": s.focus_tol}
-    region = feasible_region(
-        feet=problem.contact_points,
-        normals=problem.normals,
-        stance=problem.stance,
-        mu=problem.mu,
-        mass=problem.mass,
-        jacobians=problem.jacobians,
-        torque_limits=problem.torque_limits,
-        leg_bias=problem.leg_bias,
-        com_acc=problem.com_acc,
-        ang_momentum_rate=problem.ang_momentum_rate,
-        ext_force=problem.ext_force,
-        ext_torque=problem.ext_torque,
-        friction=s.friction,
-        tol=s.tol,
-        contact_torque_limit=s.contact_torque_limit,
-        gravity=problem.gravity,
-        max_lps=s.max_lps,
-        **focus,
+    focused = s.focus_tol is not None
+    region = solve_region(
+        problem.contact_set(s.friction, s.contact_torque_limit),
+        problem.leg_limits(),
+        problem.load(),
+        RegionSettings(tol=s.tol, max_lps=s.max_lps, focus_tol=s.focus_tol if focused else DEFAULT_FOCUS_TOL),
+        focus=icp if focused else None,
     )
     t2 = time.perf_counter()
     timings = {"kinematics_dynamics": t1 - t0, "region": t2 - t1}

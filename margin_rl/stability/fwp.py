@@ -167,15 +167,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from margin_rl.robot import Robot
 from margin_rl.stability.analytic import ContactProblem, contact_problem
-from margin_rl.stability.region import (
-    _as_array,
-    _as_rows,
-    _check_finite,
-    _frozen,
-    _positive_scalar,
-    _settings,
-    _tangent_bases,
+from margin_rl.stability.contact import (
+    INFEASIBLE,
+    as_array,
+    as_rows,
+    check_finite,
+    frozen_array,
     gravito_inertial_wrench,
+    positive_scalar,
+    solver_settings,
+    tangent_bases,
     validate_contact_arrays,
 )
 
@@ -389,8 +390,8 @@ def _check_n_faces(n_faces: Any) -> int:
 
 
 def _unit_normal(normal: ArrayLike, name: str = "normal") -> FloatArray:
-    n = _as_array(name, normal, (3,))
-    _check_finite(name, n)
+    n = as_array(name, normal, (3,))
+    check_finite(name, n)
     length = float(np.linalg.norm(n))
     if length < 1e-9:
         raise ValueError(f"{name} must be non-zero")
@@ -399,7 +400,7 @@ def _unit_normal(normal: ArrayLike, name: str = "normal") -> FloatArray:
 
 def _pyramid_faces(normal: FloatArray, mu: float, n_faces: int) -> FloatArray:
     """Rows ``a_j`` of the inscribed pyramid ``a_j^T f <= 0``, a_j = d_j - mu cos(pi/k) n (unit)."""
-    t1, t2 = _tangent_bases(normal[None, :])
+    t1, t2 = tangent_bases(normal[None, :])
     th = 2.0 * np.pi * np.arange(n_faces) / n_faces
     d = np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2
     faces = d - mu * math.cos(math.pi / n_faces) * normal
@@ -425,9 +426,9 @@ def friction_cone_edges(normal: ArrayLike, mu: float, n_faces: int = DEFAULT_N_F
         the pyramid's edges, which lie on the Coulomb cone (the pyramid is inscribed).
     """
     n = _unit_normal(normal)
-    mu_v = _positive_scalar("mu", mu)
+    mu_v = positive_scalar("mu", mu)
     k = _check_n_faces(n_faces)
-    t1, t2 = _tangent_bases(n[None, :])
+    t1, t2 = tangent_bases(n[None, :])
     th = (2.0 * np.arange(k) + 1.0) * np.pi / k
     e = n + mu_v * (np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2)
     return e / np.linalg.norm(e, axis=1, keepdims=True)
@@ -472,7 +473,7 @@ def _adjacency(a: FloatArray, active: NDArray[np.bool_]) -> NDArray[np.bool_]:
 
 
 def _check_jacobian(jac: FloatArray, name: str) -> None:
-    _check_finite(name, jac)
+    check_finite(name, jac)
     sv = np.linalg.svd(jac, compute_uv=False)
     if sv.size < 3 or sv[2] <= 1e-9 * max(sv[0], 1e-300):
         raise ValueError(f"{name} must have rank 3 (a singular leg makes the force polytope unbounded)")
@@ -489,14 +490,14 @@ def _leg_arrays(
         raise ValueError(f"jacobian must have shape (3, k) with k >= 3, got {jac.shape}")
     k = jac.shape[1]
     _check_jacobian(jac, "jacobian")
-    lo = _as_array("torque_lo", torque_lo, (k,))
-    hi = _as_array("torque_hi", torque_hi, (k,))
-    _check_finite("torque_lo", lo)
-    _check_finite("torque_hi", hi)
+    lo = as_array("torque_lo", torque_lo, (k,))
+    hi = as_array("torque_hi", torque_hi, (k,))
+    check_finite("torque_lo", lo)
+    check_finite("torque_hi", hi)
     if np.any(lo > hi):
         raise ValueError("torque_lo must be <= torque_hi for every joint")
-    bias = np.zeros(k) if leg_bias is None else _as_array("leg_bias", leg_bias, (k,))
-    _check_finite("leg_bias", bias)
+    bias = np.zeros(k) if leg_bias is None else as_array("leg_bias", leg_bias, (k,))
+    check_finite("leg_bias", bias)
     return jac, lo, hi, bias
 
 
@@ -599,7 +600,7 @@ def bounded_friction_cone(
         Malformed inputs (the message names the argument).
     """
     n = _unit_normal(normal)
-    mu_v = _positive_scalar("mu", mu)
+    mu_v = positive_scalar("mu", mu)
     k = _check_n_faces(n_faces)
     jac, lo, hi, bias = _leg_arrays(jacobian, torque_lo, torque_hi, leg_bias)
     return _bounded_cone(n, mu_v, jac, lo, hi, bias, k)[0]
@@ -620,10 +621,10 @@ def contact_wrench_vertices(point: ArrayLike, force_vertices: ArrayLike) -> Floa
     (m, 6) ndarray
         ``(f, tau)`` [N, N m].
     """
-    p = _as_array("point", point, (3,))
-    _check_finite("point", p)
-    f = _as_rows("force_vertices", force_vertices, 3, rows="m")
-    _check_finite("force_vertices", f)
+    p = as_array("point", point, (3,))
+    check_finite("point", p)
+    f = as_rows("force_vertices", force_vertices, 3, rows="m")
+    check_finite("force_vertices", f)
     return np.hstack([f, np.cross(p, f)])
 
 
@@ -804,7 +805,7 @@ def feasible_wrench_polytope(
     pts, nrm, jac, lo, hi, bias, idx = validate_contact_arrays(
         points, normals, stance, jacobians, torque_limits, leg_bias, points_name="points", min_joints=3
     )
-    mu_v = _positive_scalar("mu", mu)
+    mu_v = positive_scalar("mu", mu)
     k_faces = _check_n_faces(n_faces)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise ValueError("torque_limits must be finite for stance legs (the FWP would be unbounded)")
@@ -817,9 +818,9 @@ def feasible_wrench_polytope(
     for i in range(idx.size):
         v, active, a = _bounded_cone(nrm[i], mu_v, jac[i], lo[i], hi[i], bias[i], k_faces)
         ta, tb = _torque_rows(jac[i], lo[i], hi[i], bias[i])
-        forces.append(_frozen(v))
-        actuation.append(_frozen(_polytope_vertices(ta, tb)[0]))
-        edges.append(_frozen(friction_cone_edges(nrm[i], mu_v, k_faces)))
+        forces.append(frozen_array(v))
+        actuation.append(frozen_array(_polytope_vertices(ta, tb)[0]))
+        edges.append(frozen_array(friction_cone_edges(nrm[i], mu_v, k_faces)))
         contacts.append(_contact(pts[i], v, active, a, ell))
     t1 = time.perf_counter()
 
@@ -848,11 +849,11 @@ def feasible_wrench_polytope(
         vertices += c.wrenches[tuples[:, i]]
     t2 = time.perf_counter()
     return FeasibleWrenchPolytope(
-        vertices=_frozen(vertices * homog),
-        vertex_tuples=_frozen(tuples, np.intp),
-        center=_frozen(center),
-        points=_frozen(pts),
-        stance_index=_frozen(idx, np.intp),
+        vertices=frozen_array(vertices * homog),
+        vertex_tuples=frozen_array(tuples, np.intp),
+        center=frozen_array(center),
+        points=frozen_array(pts),
+        stance_index=frozen_array(idx, np.intp),
         force_vertices=tuple(forces),
         actuation_vertices=tuple(actuation),
         cone_edges=tuple(edges),
@@ -875,10 +876,9 @@ def feasible_wrench_polytope(
 
 
 # Tighter than the region's programs: s is read off directly rather than as a polygon vertex.
-_SETTINGS_FAST = _settings(robust=False, tol=1e-9, max_iter=200)
-_SETTINGS_ROBUST = _settings(robust=True, tol=1e-9, max_iter=200)
-# Interior-point infeasibility certificates are reliable: not retried.
-_INFEASIBLE = (clarabel.SolverStatus.PrimalInfeasible, clarabel.SolverStatus.AlmostPrimalInfeasible)
+_SETTINGS_FAST = solver_settings(robust=False, tol=1e-9, max_iter=200)
+_SETTINGS_ROBUST = solver_settings(robust=True, tol=1e-9, max_iter=200)
+# Interior-point infeasibility certificates are reliable: not retried (INFEASIBLE).
 
 
 def _solve_lp(q: FloatArray, a: sp.csc_matrix, b: FloatArray, n_eq: int) -> tuple[Any, FloatArray]:
@@ -892,7 +892,7 @@ def _solve_lp(q: FloatArray, a: sp.csc_matrix, b: FloatArray, n_eq: int) -> tupl
         status = sol.status
         if status == clarabel.SolverStatus.Solved:
             return status, np.asarray(sol.x)
-        if status in _INFEASIBLE:
+        if status in INFEASIBLE:
             break
     return status, np.full(n, np.nan)
 
@@ -920,7 +920,7 @@ def _gauge_lp(blocks: list[FloatArray], rhs: FloatArray, basis: FloatArray) -> t
     q = np.zeros(n_mu + 1)
     q[n_mu] = 1.0
     status, x = _solve_lp(q, a.tocsc(), b, r + n_blocks)
-    if status in _INFEASIBLE:
+    if status in INFEASIBLE:
         return math.inf, "wrench outside the cone of the centred vertices (is the centre interior?)", 0.0
     if status != clarabel.SolverStatus.Solved:
         return math.nan, f"solver status {status}", time.perf_counter() - t0
@@ -969,13 +969,13 @@ def feasibility_factor(
         their affine hull, or if ``center`` is not interior and the wrench is not in the cone of the
         centred vertices.
     """
-    v = _as_rows("vertices", vertices, 6, rows="V", min_rows=1)
-    _check_finite("vertices", v)
-    w = _as_array("wrench", wrench, (6,))
-    _check_finite("wrench", w)
-    c = v.mean(axis=0) if center is None else _as_array("center", center, (6,))
-    _check_finite("center", c)
-    h = _homogeniser(_positive_scalar("length_scale", length_scale))
+    v = as_rows("vertices", vertices, 6, rows="V", min_rows=1)
+    check_finite("vertices", v)
+    w = as_array("wrench", wrench, (6,))
+    check_finite("wrench", w)
+    c = v.mean(axis=0) if center is None else as_array("center", center, (6,))
+    check_finite("center", c)
+    h = _homogeniser(positive_scalar("length_scale", length_scale))
     return _factor([(v - c) * h], (w - c) * h, n_equalities_paper=7, dual=dual)
 
 
@@ -1041,8 +1041,8 @@ def minkowski_feasibility_factor(fwp: FeasibleWrenchPolytope, wrench: ArrayLike)
     FeasibilityResult
         Status ``"infeasible"`` and ``s = -inf`` for an empty FWP.
     """
-    w = _as_array("wrench", wrench, (6,))
-    _check_finite("wrench", w)
+    w = as_array("wrench", wrench, (6,))
+    check_finite("wrench", w)
     n = len(fwp.force_vertices)
     n_var = sum(fwp.contact_vertex_counts) + 1
     if fwp.dim < 0:
@@ -1087,7 +1087,7 @@ def _residual_lp(blocks: list[FloatArray], w: FloatArray, convex: bool) -> float
     b = np.concatenate([w / scale, np.ones(n_b), np.zeros(n_var)])
     q = np.concatenate([np.zeros(n_a), np.ones(12)])
     status, x = _solve_lp(q, a, b, 6 + n_b)
-    if status in _INFEASIBLE:  # only possible for an empty block (no vertex to take a convex weight)
+    if status in INFEASIBLE:  # only possible for an empty block (no vertex to take a convex weight)
         return math.inf
     if status != clarabel.SolverStatus.Solved:
         return math.nan
@@ -1117,8 +1117,8 @@ def wrench_violations(fwp: FeasibleWrenchPolytope, wrench: ArrayLike) -> tuple[s
     -------
     tuple of str
     """
-    w = _as_array("wrench", wrench, (6,))
-    _check_finite("wrench", w)
+    w = as_array("wrench", wrench, (6,))
+    check_finite("wrench", w)
     h = _homogeniser(fwp.length_scale)
     wh = w * h
     tol = _MEMBER_TOL * max(1.0, float(np.sum(np.abs(wh))))
@@ -1162,9 +1162,9 @@ def fwp_halfspaces(vertices: ArrayLike, length_scale: float) -> FloatArray:
     """
     from scipy.spatial import ConvexHull  # local: only this function needs qhull
 
-    v = _as_rows("vertices", vertices, 6, rows="V", min_rows=7)
-    _check_finite("vertices", v)
-    ell = _positive_scalar("length_scale", length_scale)
+    v = as_rows("vertices", vertices, 6, rows="V", min_rows=7)
+    check_finite("vertices", v)
+    ell = positive_scalar("length_scale", length_scale)
     h = _homogeniser(ell)
     vh = v * h
     c = vh.mean(axis=0)
@@ -1199,11 +1199,11 @@ def halfspace_margin(halfspaces: ArrayLike, wrench: ArrayLike, length_scale: flo
         Positive inside (largest disturbance, in newtons of equivalent force, that keeps the wrench
         feasible), zero on the boundary, negative outside (largest facet violation, not a distance).
     """
-    hs = _as_rows("halfspaces", halfspaces, 7, rows="h", min_rows=1)
-    _check_finite("halfspaces", hs)
-    w = _as_array("wrench", wrench, (6,))
-    _check_finite("wrench", w)
-    ell = _positive_scalar("length_scale", length_scale)
+    hs = as_rows("halfspaces", halfspaces, 7, rows="h", min_rows=1)
+    check_finite("halfspaces", hs)
+    w = as_array("wrench", wrench, (6,))
+    check_finite("wrench", w)
+    ell = positive_scalar("length_scale", length_scale)
     a = hs[:, :6]
     q_inv_norm = np.sqrt(np.sum(a[:, :3] ** 2, axis=1) + ell**2 * np.sum(a[:, 3:] ** 2, axis=1))
     if np.any(q_inv_norm <= 0.0):
@@ -1278,14 +1278,14 @@ def fwp_feasibility(
     _check_n_faces(n_faces)
     problem = contact_problem(robot, np.asarray(lam, dtype=np.float64))
     t1 = time.perf_counter()
-    nan_wrench = _frozen(np.full(6, np.nan))
+    nan_wrench = frozen_array(np.full(6, np.nan))
     if not isinstance(problem, ContactProblem):
         status, message, _ = problem
         timings = {"kinematics": t1 - t0, "total": time.perf_counter() - t0}
         return FWPFeasibility(math.nan, status, nan_wrench, (), None, (), timings, message)
 
     fwp = contact_problem_polytope(problem, n_faces=n_faces, prune=prune)
-    wrench = _frozen(problem.gravito_inertial_wrench())
+    wrench = frozen_array(problem.gravito_inertial_wrench())
     t2 = time.perf_counter()
     if prune and fwp.n_vertices > 0:
         res = feasibility_factor(fwp.vertices, wrench, center=fwp.center, length_scale=fwp.length_scale)

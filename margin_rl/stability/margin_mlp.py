@@ -31,7 +31,7 @@ from torch import nn
 from torch.nn import functional
 
 from margin_rl.stability.lambda_state import MIRROR_SIGN, MIRROR_SOURCE, lambda_names
-from margin_rl.stability.learned import ARCHITECTURE, MarginWeights
+from margin_rl.stability.mlp_weights import ARCHITECTURE, MarginWeights
 
 
 def _uniform(shape: tuple[int, ...], fan_in: int) -> nn.Parameter:
@@ -47,7 +47,7 @@ class MarginMLP(nn.Module):
     the parameters (for training); the normalisation buffers are fixed. ``mirror_tied=True`` ties the
     weights so that the network is exactly mirror-invariant (module docstring). ``widths`` other than the
     paper's are for capacity experiments (``benchmarks/bench_margin_capacity.py``): such a network trains
-    and evaluates here, but its weights are refused by :class:`~margin_rl.stability.learned.MarginWeights`.
+    and evaluates here, but its weights are refused by :class:`~margin_rl.stability.mlp_weights.MarginWeights`.
 
     Raises:
         ValueError: ``mirror_tied`` with a normalisation that is not mirror-symmetric (then the tied
@@ -152,7 +152,7 @@ class MarginMLP(nn.Module):
         return module
 
     def to_weights(self) -> MarginWeights:
-        """Plain-numpy dense parameters for saving (see :func:`margin_rl.stability.learned.save_weights`)."""
+        """Plain-numpy dense parameters for saving (see :func:`margin_rl.stability.mlp_weights.save_weights`)."""
 
         def numpy(t: torch.Tensor) -> np.ndarray:
             return t.detach().cpu().double().numpy()

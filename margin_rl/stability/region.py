@@ -1,5 +1,13 @@
 r"""Feasible Region of a legged robot by iterative projection (Orsolino et al., Alg. 1).
 
+This module holds the region's conic program, its support oracle and the public entry points:
+:func:`feasible_region` (every input as a keyword) and :func:`solve_region` (the same inputs grouped in
+:class:`~margin_rl.stability.contact.ContactSet`, :class:`~margin_rl.stability.contact.LegLimits`,
+:class:`~margin_rl.stability.contact.CentroidalLoad` and :class:`RegionSettings`). The input checks and
+the solver kit are in :mod:`~margin_rl.stability.contact` (shared with the wrench polytope), the loop
+of Alg. 1 in :mod:`~margin_rl.stability.projection` and the polygon geometry in
+:mod:`~margin_rl.stability.polygon`; their public names are re-exported here.
+
 The Feasible Region :math:`\mathcal{Y}_{fr}` is the set of horizontal CoM positions
 :math:`c_{xy}` for which the robot, with its feet where they are and with the given
 centroidal accelerations and external wrench, can find contact forces that satisfy the
@@ -119,7 +127,6 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -127,6 +134,35 @@ import clarabel
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
+
+from margin_rl.stability.contact import (
+    DEFAULT_CONTACT_TORQUE_LIMIT,
+    INFEASIBLE,
+    SOLVED,
+    CentroidalLoad,
+    ContactSet,
+    LegLimits,
+    as_array,
+    check_finite,
+    frozen_array,
+    gravito_inertial_wrench,
+    parse_friction,
+    positive_scalar,
+    solver_settings,
+    tangent_bases,
+    validate_contact_arrays,
+)
+from margin_rl.stability.polygon import convex_polygon, halfspaces_from_polygon, polygon_area, shoelace
+from margin_rl.stability.projection import (
+    DEFAULT_FOCUS_TOL,
+    DEFAULT_MAX_LPS,
+    DEFAULT_TOL,
+    SUPPORT_FAILED,
+    SUPPORT_INFEASIBLE,
+    SUPPORT_OK,
+    ProjectionResult,
+    iterative_projection,
+)
 
 __all__ = [
     "DEFAULT_CONTACT_TORQUE_LIMIT",
@@ -136,66 +172,28 @@ __all__ = [
     "SUPPORT_FAILED",
     "SUPPORT_INFEASIBLE",
     "SUPPORT_OK",
+    "CentroidalLoad",
+    "ContactSet",
     "FeasibleRegion",
+    "LegLimits",
     "ProjectionResult",
+    "RegionSettings",
     "feasible_region",
+    "gravito_inertial_wrench",
     "halfspaces_from_polygon",
     "iterative_projection",
     "polygon_area",
+    "solve_region",
+    "validate_contact_arrays",
 ]
 
-#: Default stopping tolerance ``area(outer) - area(inner)`` [m^2].  Chosen from a study on random
-#: 30 kg quadruped states (tilted normals, accelerations, external wrench, cone friction; see the
-#: benchmark): against a reference with tol = 1e-7, 5e-4 m^2 gives a boundary (Hausdorff) error of
-#: ~1.7 mm median / 2.8 mm 95th percentile and an inside-margin error <= 1.5 mm with ~20 programs
-#: for 4 contacts and ~12 for 3; 1e-4 m^2 cuts the error ~3x for ~40 % more programs.  Polygonal
-#: regions (pyramids, or cones that never bind) reach a zero gap after ~2 programs per vertex.
-DEFAULT_TOL: float = 5e-4
-#: Default cap on the number of conic programs per call (the initial 4 included); the study above
-#: never needed more than 27 at the default tol.
-DEFAULT_MAX_LPS: int = 40
-#: Default width [m] of the signed-distance bracket at which a focused projection stops
-#: (``feasible_region(focus=...)``): the margin of the focus point is then known to 0.5 mm.
-DEFAULT_FOCUS_TOL: float = 5e-4
-#: Default w_M of eq. (3) [N m].  The paper lets w_M -> 0; 0.01 N m changes the region of a
-#: 30 kg robot by at most n * 0.01 / 294 m ~ 0.1 mm (4 feet) and gives a two-contact region a
-#: half-width <= 2 sqrt(2) * 0.01 / 294 m ~ 0.1 mm, while keeping it full-dimensional.
-DEFAULT_CONTACT_TORQUE_LIMIT: float = 1e-2
 #: Default half-size of the clipping box on c_xy [m]; far beyond any leg's reach.
 DEFAULT_EXTENT: float = 10.0
 
-# Outcomes of one support-function evaluation in :func:`iterative_projection`.
-SUPPORT_OK: int = 0
-SUPPORT_INFEASIBLE: int = 1
-SUPPORT_FAILED: int = 2
-
-# Points closer than this [m] are merged, and a vertex closer than _COLLINEAR_TOL [m] to the chord
-# of its neighbours is dropped, so that noise from the interior-point solver (~1e-9 m) never
-# produces a tiny edge whose normal would be meaningless.
-_MERGE_TOL: float = 1e-6
-_COLLINEAR_TOL: float = 1e-8
 # A vertex within this distance [m] of the clipping box marks the region "unbounded".
 _BOX_TOL: float = 1e-6
 
-# The four initial directions are the diagonals: for an axis-aligned rectangular support
-# polygon (the common quadruped case in the yaw frame) each one hits a corner exactly, while
-# axis directions would hit whole edges and return their midpoints.
-_INITIAL_ANGLES: tuple[float, ...] = tuple(math.pi / 4 + k * math.pi / 2 for k in range(4))
-
-# AlmostSolved is *not* accepted: it meets only the reduced tolerances (5e-5 on the gap), and a
-# point that far from optimal along a nearly flat face breaks the angular order of the support
-# points; such directions are retried with the robust solver instead.
-_SOLVED = (clarabel.SolverStatus.Solved,)
-_INFEASIBLE = (clarabel.SolverStatus.PrimalInfeasible, clarabel.SolverStatus.AlmostPrimalInfeasible)
-
 FloatArray = NDArray[np.float64]
-
-
-def _frozen(a: ArrayLike, dtype: Any = np.float64) -> Any:
-    """A read-only copy (results are frozen dataclasses; their arrays must not change either)."""
-    out = np.array(a, dtype=dtype)
-    out.flags.writeable = False
-    return out
 
 
 @dataclass(frozen=True)
@@ -256,564 +254,20 @@ class FeasibleRegion:
 
 
 @dataclass(frozen=True)
-class ProjectionResult:
-    """Result of :func:`iterative_projection`.
+class RegionSettings:
+    """How :func:`solve_region` projects: accuracy, program budget and clipping box.
 
-    Attributes
-    ----------
-    points : (N, 2) ndarray
-        Support points, one per successful direction, in increasing direction angle (CCW).
-    angles : (N,) ndarray
-        Direction angles [rad] of ``points``.
-    gap : float
-        Total cap area ``area(outer) - area(inner)`` at termination, caps whose refining
-        direction failed included (the loop itself stops once the other caps are within
-        ``tol``).
-    n_evals : int
-        Number of support evaluations.
-    status : str
-        ``"ok"``, ``"max_lps"``, ``"inaccurate"``, ``"empty"`` or ``"solver_error"``.
-    margin_bounds : (float, float)
-        With a focus point: the signed distances [m] of the focus to the inner and to the outer
-        polygon, which bracket its signed distance to the true set; ``(nan, nan)`` otherwise.
+    Attributes:
+        tol: stopping tolerance ``area(outer) - area(inner)`` [m^2] (> 0) of the area criterion.
+        max_lps: maximum number of conic programs (integer >= 4).
+        extent: half-size [m] of the box ``|c_x|, |c_y| <= extent`` that keeps the programs bounded.
+        focus_tol: bracket width [m] (> 0) at which a projection focused on a point stops.
     """
 
-    points: FloatArray
-    angles: FloatArray
-    gap: float
-    n_evals: int
-    status: str
-    margin_bounds: tuple[float, float] = (math.nan, math.nan)
-
-
-# --------------------------------------------------------------------------------------------
-# Planar geometry (pure Python floats: the polygons have tens of vertices at most)
-# --------------------------------------------------------------------------------------------
-
-
-def _cap_area(t1: float, x1: float, y1: float, t2: float, x2: float, y2: float) -> float:
-    r"""Area of the outer "cap" triangle over the inner edge from point 1 to point 2.
-
-    Point :math:`k` maximises :math:`a_k^T c` with :math:`a_k = (\cos t_k, \sin t_k)` and
-    :math:`0 < t_2 - t_1`.  With :math:`e = p_2 - p_1`, its outward normal :math:`\nu = (e_y,
-    -e_x)` (both of length :math:`\ell`), :math:`S_k = a_k^T e` and :math:`C_k = a_k^T \nu`, the
-    apex of the triangle bounded by the two support lines has height :math:`\ell |S_1| S_2 /
-    (C_1 S_2 + C_2 |S_1|)` over the edge, and :math:`C_1 S_2 + C_2 |S_1| = \ell^2 \sin(t_2 -
-    t_1)`.  Hence :math:`A = \ell^2 |S_1| S_2 / (2 \ell^2 \sin(t_2 - t_1))`.
-    """
-    ex = x2 - x1
-    ey = y2 - y1
-    l2 = ex * ex + ey * ey
-    if l2 <= _MERGE_TOL * _MERGE_TOL:
-        return 0.0
-    s1 = -(math.cos(t1) * ex + math.sin(t1) * ey)  # >= 0 up to solver noise: p1 maximises a1
-    s2 = math.cos(t2) * ex + math.sin(t2) * ey  # >= 0 up to solver noise: p2 maximises a2
-    if s1 <= 0.0 or s2 <= 0.0:
-        return 0.0
-    dt = t2 - t1
-    if dt >= math.pi - 1e-12:
-        return math.inf  # the two support lines do not close the cap
-    sin_dt = math.sin(dt)
-    if sin_dt <= 0.0:
-        return 0.0
-    return s1 * s2 / (2.0 * sin_dt)
-
-
-def _segment_distance(px: float, py: float, x1: float, y1: float, x2: float, y2: float) -> float:
-    """Euclidean distance from (px, py) to the segment (x1, y1)-(x2, y2)."""
-    ex, ey = x2 - x1, y2 - y1
-    l2 = ex * ex + ey * ey
-    t = 0.0 if l2 <= 0.0 else min(1.0, max(0.0, ((px - x1) * ex + (py - y1) * ey) / l2))
-    return math.hypot(x1 + t * ex - px, y1 + t * ey - py)
-
-
-def _cap_distance_bounds(
-    t1: float, x1: float, y1: float, t2: float, x2: float, y2: float, fx: float, fy: float
-) -> tuple[float, float]:
-    r"""Distances from the focus f to the two boundaries of one cap: ``(inner, outer)`` [m].
-
-    The true set's boundary between support points 1 and 2 lies in the cap triangle bounded by the
-    inner edge p1-p2 and the two support lines :math:`a_k^T c = a_k^T p_k`, which meet at the apex
-    :math:`c^*` solving :math:`[a_1; a_2] c^* = [a_1^T p_1; a_2^T p_2]` (determinant
-    :math:`\sin(t_2 - t_1)`). ``inner`` is the distance to the segment p1-p2, ``outer`` the distance
-    to the polyline p1-c*-p2 (the outer polygon's boundary there); ``inf`` for an open cap.
-    """
-    inner = _segment_distance(fx, fy, x1, y1, x2, y2)
-    dt = t2 - t1
-    if dt >= math.pi - 1e-12:
-        return inner, math.inf
-    det = math.sin(dt)
-    c1, s1, c2, s2 = math.cos(t1), math.sin(t1), math.cos(t2), math.sin(t2)
-    h1, h2 = c1 * x1 + s1 * y1, c2 * x2 + s2 * y2
-    if det <= 1e-6:
-        # Nearly parallel support lines: the apex is ill-conditioned and the cap negligibly thin.
-        return inner, inner
-    ax, ay = (h1 * s2 - h2 * s1) / det, (c1 * h2 - c2 * h1) / det
-    outer = min(_segment_distance(fx, fy, x1, y1, ax, ay), _segment_distance(fx, fy, ax, ay, x2, y2))
-    return inner, outer
-
-
-def _cross(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
-    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-
-
-def _convex_polygon(points: Sequence[tuple[float, float]]) -> list[tuple[float, float]]:
-    """CCW convex polygon of the support points, without near-duplicate or collinear vertices.
-
-    First the exact convex hull (Andrew's monotone chain with a strict turn test, so it does
-    not depend on the order of the points); then, on that convex polygon, vertices closer than
-    ``_MERGE_TOL`` to their predecessor are merged and vertices closer than ``_COLLINEAR_TOL`` to
-    the chord of their neighbours are dropped (removing a vertex of a convex polygon keeps it
-    convex).  Tolerances are applied only after the hull: inside the chain, noise of 1e-11 m
-    in x scrambles the order of points on a vertical edge and a tolerant turn test can then
-    drop a true corner.  Returns 1 point or 2 (a segment) for degenerate sets.
-    """
-    pts = sorted(set(points))
-    if len(pts) <= 2:
-        hull = pts
-    else:
-        lower: list[tuple[float, float]] = []
-        for p in pts:
-            while len(lower) >= 2 and _cross(lower[-2], lower[-1], p) <= 0.0:
-                lower.pop()
-            lower.append(p)
-        upper: list[tuple[float, float]] = []
-        for p in reversed(pts):
-            while len(upper) >= 2 and _cross(upper[-2], upper[-1], p) <= 0.0:
-                upper.pop()
-            upper.append(p)
-        hull = lower[:-1] + upper[:-1]
-    out: list[tuple[float, float]] = []
-    for p in hull:
-        if not out or math.hypot(p[0] - out[-1][0], p[1] - out[-1][1]) > _MERGE_TOL:
-            out.append(p)
-    while len(out) > 1 and math.hypot(out[0][0] - out[-1][0], out[0][1] - out[-1][1]) <= _MERGE_TOL:
-        out.pop()
-    i = 0
-    stable = 0  # consecutive vertices checked without a removal
-    while len(out) >= 3 and stable < len(out):
-        i %= len(out)
-        o, a, b = out[i - 1], out[i], out[(i + 1) % len(out)]
-        if _cross(o, a, b) > _COLLINEAR_TOL * math.hypot(b[0] - o[0], b[1] - o[1]):
-            i += 1
-            stable += 1
-        else:
-            del out[i]
-            stable = 0
-    if len(out) >= 3:
-        return out
-    # Degenerate (a segment or a point up to the tolerances): the farthest pair of all points,
-    # since the deletions above may have kept interior points of the segment.
-    best = (-1.0, pts[0], pts[0])
-    for j, p in enumerate(pts):
-        for q in pts[j + 1 :]:
-            d = math.hypot(p[0] - q[0], p[1] - q[1])
-            if d > best[0]:
-                best = (d, p, q)
-    return [best[1]] if best[0] <= _MERGE_TOL else [best[1], best[2]]
-
-
-def _shoelace(pts: Sequence[tuple[float, float]]) -> float:
-    """Signed area of a polygon given as a list of (x, y) tuples (pure Python: tiny inputs)."""
-    if len(pts) < 3:
-        return 0.0
-    acc = 0.0
-    x0, y0 = pts[-1]
-    for x1, y1 in pts:
-        acc += x0 * y1 - x1 * y0
-        x0, y0 = x1, y1
-    return 0.5 * acc
-
-
-def polygon_area(vertices: ArrayLike) -> float:
-    """Signed area (shoelace) [m^2] of a polygon given as (m, 2) vertices; positive if CCW."""
-    v = np.asarray(vertices, dtype=np.float64)
-    if v.shape[0] < 3:
-        return 0.0
-    x, y = v[:, 0], v[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
-
-
-def halfspaces_from_polygon(vertices: ArrayLike) -> FloatArray:
-    """Half-space rows ``[n_x, n_y, a]`` (inward unit normals, ``n . p - a >= 0`` inside).
-
-    Parameters
-    ----------
-    vertices : (m, 2) array_like
-        CCW vertices of a convex polygon [m], as in :attr:`FeasibleRegion.vertices`.  Degenerate
-        inputs: ``m == 2`` (segment) gives the two sides plus the two end caps; ``m == 1``
-        (point) gives four axis-aligned rows; ``m == 0`` gives an empty (0, 3) array.
-
-    Returns
-    -------
-    (h, 3) ndarray
-    """
-    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 2)
-    m = v.shape[0]
-    if m == 0:
-        return np.zeros((0, 3))
-    if m == 1:
-        normals = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
-        return np.column_stack([normals, normals @ v[0]])
-    if m == 2:
-        d = v[1] - v[0]
-        d = d / np.linalg.norm(d)
-        left = np.array([-d[1], d[0]])
-        normals = np.array([left, -left, d, -d])
-        anchors = np.array([v[0], v[0], v[0], v[1]])
-        return np.column_stack([normals, np.einsum("ij,ij->i", normals, anchors)])
-    # Edge vectors v[i+1] - v[i] (cyclic), without np.roll's overhead.
-    e = np.empty_like(v)
-    np.subtract(v[1:], v[:-1], out=e[:-1])
-    np.subtract(v[0], v[-1], out=e[-1])
-    inward = np.empty_like(v)  # left of a CCW edge is inside
-    inward[:, 0], inward[:, 1] = -e[:, 1], e[:, 0]
-    inward /= np.linalg.norm(inward, axis=1, keepdims=True)
-    out = np.empty((m, 3))
-    out[:, :2] = inward
-    out[:, 2] = np.einsum("ij,ij->i", inward, v)
-    return out
-
-
-def iterative_projection(
-    support: Callable[[float, float], tuple[int, float, float]],
-    tol: float = DEFAULT_TOL,
-    max_evals: int = DEFAULT_MAX_LPS,
-    focus: tuple[float, float] | None = None,
-    focus_tol: float = DEFAULT_FOCUS_TOL,
-) -> ProjectionResult:
-    r"""Bretl & Lall iterative projection of a compact convex planar set given its support oracle.
-
-    Parameters
-    ----------
-    support : callable ``(a_x, a_y) -> (code, x, y)``
-        Returns a point ``(x, y)`` of the set maximising ``a_x x + a_y y`` for the unit
-        direction ``a``, with ``code`` :data:`SUPPORT_OK`; :data:`SUPPORT_INFEASIBLE` if the
-        set is empty (the projection stops) or :data:`SUPPORT_FAILED` if this direction could
-        not be evaluated (it is skipped).
-    tol : float
-        Stop when ``area(outer) - area(inner) <= tol`` [m^2].
-    max_evals : int
-        Maximum number of oracle calls (>= 4: the four diagonal directions come first).
-    focus : (float, float), optional
-        Refine only where it matters for the signed distance of this point to the set. The inner
-        polygon P_in and the outer polygon P_out bracket the set S, P_in ⊆ S ⊆ P_out, and the
-        signed distance sd (positive inside) is monotone under inclusion, so
-        sd(f, P_in) <= sd(f, S) <= sd(f, P_out). Each step refines the cap that limits this
-        bracket (the cap nearest to f) and the loop stops once the bracket is within
-        ``focus_tol``; ``tol`` is then not used. This typically needs a fraction of the programs
-        of a uniformly accurate region (see the analytic-margin benchmark).
-    focus_tol : float
-        Width of the signed-distance bracket at which a focused projection stops [m].
-
-    Returns
-    -------
-    ProjectionResult
-        Support points in CCW order of their directions (duplicates possible; use a convex hull
-        to get vertices).
-    """
-    angles: list[float] = []
-    xs: list[float] = []
-    ys: list[float] = []
-    n_evals = 0
-    failed = False
-    for t in _INITIAL_ANGLES:
-        n_evals += 1
-        code, x, y = support(math.cos(t), math.sin(t))
-        if code == SUPPORT_INFEASIBLE:
-            return ProjectionResult(np.zeros((0, 2)), np.zeros(0), math.nan, n_evals, "empty")
-        if code == SUPPORT_OK:
-            angles.append(t)
-            xs.append(x)
-            ys.append(y)
-        else:
-            failed = True
-    if not angles:
-        return ProjectionResult(np.zeros((0, 2)), np.zeros(0), math.nan, n_evals, "solver_error")
-
-    def cap(k: int) -> float:
-        if len(angles) == 1:
-            return 0.0
-        k2 = (k + 1) % len(angles)
-        t2 = angles[k2] if k2 > k else angles[k2] + 2.0 * math.pi
-        return _cap_area(angles[k], xs[k], ys[k], t2, xs[k2], ys[k2])
-
-    caps = [cap(k) for k in range(len(angles))]
-    if focus is not None:
-        return _focused_projection(support, angles, xs, ys, caps, n_evals, failed, max_evals, focus, focus_tol, cap)
-    # A cap whose refining direction failed is frozen: its area moves to `frozen_gap` and its
-    # slot is zeroed so that it is never selected again (its two points never change).
-    frozen_gap = 0.0
-    status = "ok"
-    while True:
-        active = sum(caps)
-        if active <= tol:
-            break
-        if n_evals >= max_evals:
-            status = "max_lps"
-            break
-        k = caps.index(max(caps))
-        code, x, y, t_new, evals = _refine_cap(support, angles, xs, ys, k)
-        n_evals += evals
-        if code != SUPPORT_OK:
-            # (Infeasible cannot happen for a non-empty set: a numerical failure as well.)
-            failed = True
-            frozen_gap += caps[k]
-            caps[k] = 0.0
-            continue
-        # Inserting after k keeps `angles` increasing within [angles[0], angles[0] + 2 pi).
-        pos = k + 1
-        angles.insert(pos, t_new)
-        xs.insert(pos, x)
-        ys.insert(pos, y)
-        caps.insert(pos, 0.0)
-        caps[k] = cap(k)
-        caps[pos] = cap(pos)
-    if failed and status == "ok":
-        status = "inaccurate"
-    pts = np.column_stack([np.asarray(xs), np.asarray(ys)])
-    return ProjectionResult(pts, np.asarray(angles), float(sum(caps) + frozen_gap), n_evals, status)
-
-
-def _next_direction(angles: list[float], xs: list[float], ys: list[float], k: int) -> float:
-    """Refining direction [rad] for cap k: the outward normal of its inner edge p_k -> p_k+1.
-
-    Points are CCW, so outward is on the right. If solver noise pushed that normal outside the
-    cap's wedge of support directions, or the cap is open (wedge >= pi), the wedge is bisected.
-    """
-    k2 = (k + 1) % len(angles)
-    t1 = angles[k]
-    t2 = angles[k2] if k2 > k else angles[k2] + 2.0 * math.pi
-    t_new = math.atan2(xs[k] - xs[k2], ys[k2] - ys[k])
-    t_new = t1 + (t_new - t1) % (2.0 * math.pi)
-    if not (t1 < t_new < t2) or t2 - t1 >= math.pi:
-        t_new = 0.5 * (t1 + t2)
-    return t_new
-
-
-def _refine_cap(
-    support: Callable[[float, float], tuple[int, float, float]],
-    angles: list[float],
-    xs: list[float],
-    ys: list[float],
-    k: int,
-) -> tuple[int, float, float, float, int]:
-    """Support point for refining cap k: ``(code, x, y, direction used, programs solved)``.
-
-    The edge's outward normal first; if its program fails (e.g. Clarabel stops at AlmostSolved,
-    which is not accepted), once more along the bisector of the cap's wedge. Any direction strictly
-    inside the wedge yields a valid support point of the same cap, so the cap is only given up
-    (frozen) when both fail.
-    """
-    t_new = _next_direction(angles, xs, ys, k)
-    code, x, y = support(math.cos(t_new), math.sin(t_new))
-    if code != SUPPORT_FAILED:
-        return code, x, y, t_new, 1
-    k2 = (k + 1) % len(angles)
-    t1 = angles[k]
-    t2 = angles[k2] if k2 > k else angles[k2] + 2.0 * math.pi
-    t_mid = 0.5 * (t1 + t2)
-    if abs(t_mid - t_new) < 1e-9:
-        return code, x, y, t_new, 1
-    code, x, y = support(math.cos(t_mid), math.sin(t_mid))
-    return code, x, y, t_mid, 2
-
-
-def _focused_projection(
-    support: Callable[[float, float], tuple[int, float, float]],
-    angles: list[float],
-    xs: list[float],
-    ys: list[float],
-    caps: list[float],
-    n_evals: int,
-    failed: bool,
-    max_evals: int,
-    focus: tuple[float, float],
-    focus_tol: float,
-    cap: Callable[[int], float],
-) -> ProjectionResult:
-    """The focused branch of :func:`iterative_projection` (see its ``focus`` parameter)."""
-    fx, fy = float(focus[0]), float(focus[1])
-
-    def bounds(k: int) -> tuple[float, float]:
-        k2 = (k + 1) % len(angles)
-        t2 = angles[k2] if k2 > k else angles[k2] + 2.0 * math.pi
-        if len(angles) == 1:
-            d = math.hypot(xs[0] - fx, ys[0] - fy)
-            return d, math.inf
-        return _cap_distance_bounds(angles[k], xs[k], ys[k], t2, xs[k2], ys[k2], fx, fy)
-
-    lo_hi = [bounds(k) for k in range(len(angles))]
-    frozen = [False] * len(angles)
-    # Support-line offsets h_k = max over all found (feasible) points of a_k . p: the solver's own
-    # point can fall short of the optimum by ~1e-5 m, and taking the max keeps P_in inside P_out.
-    dirs = [(math.cos(t), math.sin(t)) for t in angles]
-    offsets = [max(cx * x + sy * y for x, y in zip(xs, ys, strict=True)) for cx, sy in dirs]
-    status = "ok"
-    sd_in = sd_out = math.nan
-    while True:
-        # Sign of the bracket ends: inside P_in iff left of every inner edge (CCW), inside P_out
-        # iff on the inner side of every support line.
-        m = len(angles)
-        inside_in = m >= 3 and all(
-            (xs[(k + 1) % m] - xs[k]) * (fy - ys[k]) - (ys[(k + 1) % m] - ys[k]) * (fx - xs[k]) >= 0.0 for k in range(m)
-        )
-        # Slack of the focus w.r.t. each support line a_k . c <= a_k . p_k.
-        slack = min(h - cx * fx - sy * fy for (cx, sy), h in zip(dirs, offsets, strict=True))
-        lo = min(b[0] for b in lo_hi)
-        sd_in = lo if inside_in else -lo
-        # Inside P_out its boundary distance is the smallest line slack (no apex needed, so no
-        # ill-conditioned intersection of nearly parallel lines); outside, the distance to P_out's
-        # boundary polylines through the cap apexes.
-        sd_out = slack if slack >= 0.0 else -min(b[1] for b in lo_hi)
-        if sd_out - sd_in <= focus_tol:
-            break
-        if n_evals >= max_evals:
-            status = "max_lps"
-            break
-        # Refine the cap nearest to the focus among those whose boundary is still uncertain (inner
-        # and outer distances differ; which one is larger depends on the side the focus is on).
-        candidates = [k for k in range(m) if not frozen[k] and abs(lo_hi[k][1] - lo_hi[k][0]) > 0.05 * focus_tol]
-        if not candidates:
-            break
-        k = min(candidates, key=lambda k: min(lo_hi[k]))
-        code, x, y, t_new, evals = _refine_cap(support, angles, xs, ys, k)
-        n_evals += evals
-        if code != SUPPORT_OK:
-            failed = True
-            frozen[k] = True
-            continue
-        pos = k + 1
-        angles.insert(pos, t_new)
-        xs.insert(pos, x)
-        ys.insert(pos, y)
-        caps.insert(pos, 0.0)
-        frozen.insert(pos, False)
-        new_dir = (math.cos(t_new), math.sin(t_new))
-        offsets = [max(h, cx * x + sy * y) for (cx, sy), h in zip(dirs, offsets, strict=True)]
-        dirs.insert(pos, new_dir)
-        offsets.insert(pos, max(new_dir[0] * px + new_dir[1] * py for px, py in zip(xs, ys, strict=True)))
-        lo_hi.insert(pos, (0.0, 0.0))
-        caps[k], caps[pos] = cap(k), cap(pos)
-        lo_hi[k], lo_hi[pos] = bounds(k), bounds(pos)
-    if failed and status == "ok":
-        status = "inaccurate"
-    pts = np.column_stack([np.asarray(xs), np.asarray(ys)])
-    return ProjectionResult(pts, np.asarray(angles), float(sum(caps)), n_evals, status, (sd_in, sd_out))
-
-
-# --------------------------------------------------------------------------------------------
-# Input validation
-# --------------------------------------------------------------------------------------------
-
-
-def _as_array(name: str, value: ArrayLike, shape: tuple[int, ...]) -> FloatArray:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a numeric array of shape {shape}") from exc
-    if arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
-    return arr
-
-
-def _as_rows(name: str, value: ArrayLike, columns: int, rows: str = "n", min_rows: int = 0) -> FloatArray:
-    """A (rows, columns) float array with at least ``min_rows`` rows; the message names ``name``."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a numeric ({rows}, {columns}) array") from exc
-    if arr.ndim != 2 or arr.shape[1] != columns or arr.shape[0] < min_rows:
-        at_least = f" with {rows} >= {min_rows}" if min_rows else ""
-        raise ValueError(f"{name} must have shape ({rows}, {columns}){at_least}, got {np.shape(arr)}")
-    return arr
-
-
-def _check_finite(name: str, arr: FloatArray) -> None:
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name} must be finite (no NaN/inf)")
-
-
-def _positive_scalar(name: str, value: float, allow_zero: bool = False) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{name} must be a real number") from exc
-    if not math.isfinite(v) or v < 0.0 or (v == 0.0 and not allow_zero):
-        bound = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
-    return v
-
-
-def _parse_friction(friction: Any) -> int:
-    """Return 0 for the exact cone, else the number of pyramid faces (>= 3)."""
-    if isinstance(friction, str):
-        if friction == "cone":
-            return 0
-        raise ValueError(f"friction must be 'cone' or ('pyramid', k), got {friction!r}")
-    if (
-        isinstance(friction, (tuple, list))
-        and len(friction) == 2
-        and friction[0] == "pyramid"
-        and isinstance(friction[1], (int, np.integer))
-        and not isinstance(friction[1], bool)
-        and friction[1] >= 3
-    ):
-        return int(friction[1])
-    raise ValueError(f"friction must be 'cone' or ('pyramid', k) with integer k >= 3, got {friction!r}")
-
-
-def _torque_bounds(torque_limits: Any, n: int, k: int, idx: NDArray[np.intp]) -> tuple[FloatArray, FloatArray]:
-    """(lower, upper) bounds of the stance legs ``idx``; rows of swing legs are not inspected."""
-    try:
-        arr = np.asarray(torque_limits, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("torque_limits must be an (n, k) array or a (lower, upper) pair") from exc
-    if arr.ndim == 3:
-        if arr.shape != (2, n, k):
-            raise ValueError(
-                f"torque_limits as a (lower, upper) pair must be two ({n}, {k}) arrays matching "
-                f"jacobians (n, 3, k), got {arr.shape[1:]}"
-            )
-        lo, hi = arr[0][idx], arr[1][idx]
-    elif arr.ndim == 2:
-        if arr.shape != (n, k):
-            raise ValueError(f"torque_limits must have shape ({n}, {k}) matching jacobians (n, 3, k), got {arr.shape}")
-        lim = arr[idx]
-        if (lim < 0.0).any():
-            raise ValueError("torque_limits (symmetric) must be >= 0")
-        lo, hi = -lim, lim
-    else:
-        raise ValueError("torque_limits must be an (n, k) array or a (lower, upper) pair of (n, k) arrays")
-    if np.isnan(lo).any() or np.isnan(hi).any():
-        raise ValueError("torque_limits must not contain NaN")
-    if (lo == np.inf).any() or (hi == -np.inf).any():
-        raise ValueError("torque_limits: lower must be < +inf and upper > -inf")
-    if (lo > hi).any():
-        raise ValueError("torque_limits: lower > upper for some joint")
-    return lo, hi
-
-
-def _tangent_bases(normals: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Orthonormal tangents t1, t2, each (n, 3), with (t1, t2, n) right-handed.
-
-    t1 is the projection of the x axis on the tangent plane (of y when the normal is nearly
-    along x), so for flat ground t1 = x, t2 = y and a mirror y -> -y maps the basis to itself up
-    to the sign of t2 (which leaves the pyramid's set of face directions unchanged).
-    """
-    nx, ny, nz = normals[:, 0], normals[:, 1], normals[:, 2]
-    use_x = np.abs(nx) < 0.9
-    # t1 = ref - n (n . ref) with ref = x (or y), normalised.
-    dot = np.where(use_x, nx, ny)
-    t1 = -normals * dot[:, None]
-    t1[:, 0] += use_x
-    t1[:, 1] += ~use_x
-    t1 /= np.sqrt(np.einsum("ij,ij->i", t1, t1))[:, None]
-    # t2 = n x t1, written out (np.cross has a large fixed overhead on tiny arrays).
-    ax, ay, az = t1[:, 0], t1[:, 1], t1[:, 2]
-    t2 = np.empty_like(t1)
-    t2[:, 0], t2[:, 1], t2[:, 2] = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax
-    return t1, t2
+    tol: float = DEFAULT_TOL
+    max_lps: int = DEFAULT_MAX_LPS
+    extent: float = DEFAULT_EXTENT
+    focus_tol: float = DEFAULT_FOCUS_TOL
 
 
 # --------------------------------------------------------------------------------------------
@@ -929,7 +383,7 @@ def _build_problem(
     all_finite = bool(finite.all())
     n_tau = tau_b.size if all_finite else int(finite.sum())
 
-    t1, t2 = _tangent_bases(normals)
+    t1, t2 = tangent_bases(normals)
     if n_faces:
         th = 2.0 * np.pi * np.arange(n_faces) / n_faces
         # d_j^T f - mu cos(pi/k) n^T f <= 0 for the k face directions d_j; then -n^T f <= 0.
@@ -967,27 +421,8 @@ def _build_problem(
     return _Problem(_dense_to_csc(a), b, cones, n_var)
 
 
-def _settings(robust: bool, tol: float = 1e-8, max_iter: int = 100) -> Any:
-    """Clarabel settings: the fast ones, or the robust fallback (iterative refinement on).
-
-    Iterative refinement of the KKT solves costs ~1/3 of the solve time on these tiny problems
-    and, in our tests, changes the optimal support values by < 1e-9 m; it is therefore off by
-    default and only used to retry a direction whose fast solve did not converge.
-    """
-    s = clarabel.DefaultSettings()
-    s.verbose = False
-    # No presolve: the data contain no infinite bounds, and presolve may forbid data updates.
-    s.presolve_enable = False
-    s.max_iter = max_iter
-    s.tol_gap_abs = tol
-    s.tol_gap_rel = tol
-    s.tol_feas = tol
-    s.iterative_refinement_enable = robust
-    return s
-
-
-_FAST_SETTINGS = _settings(robust=False)
-_ROBUST_SETTINGS = _settings(robust=True)
+_FAST_SETTINGS = solver_settings(robust=False)
+_ROBUST_SETTINGS = solver_settings(robust=True)
 _ZERO_P: dict[int, sp.csc_matrix] = {}
 
 
@@ -1024,10 +459,10 @@ class _SupportOracle:
         solver.update(q=q)
         sol = solver.solve()
         status = sol.status
-        if status in _SOLVED:
+        if status in SOLVED:
             x = sol.x
             return SUPPORT_OK, x[0], x[1]
-        if status in _INFEASIBLE:
+        if status in INFEASIBLE:
             return SUPPORT_INFEASIBLE, math.nan, math.nan
         return SUPPORT_FAILED, math.nan, math.nan
 
@@ -1050,8 +485,8 @@ class _SupportOracle:
 
 def _empty(status: str, t0: float, message: str, n_lps: int = 0) -> FeasibleRegion:
     return FeasibleRegion(
-        vertices=_frozen(np.zeros((0, 2))),
-        halfspaces=_frozen(np.zeros((0, 3))),
+        vertices=frozen_array(np.zeros((0, 2))),
+        halfspaces=frozen_array(np.zeros((0, 3))),
         status=status,
         converged=status == "empty",
         n_lps=n_lps,
@@ -1062,117 +497,105 @@ def _empty(status: str, t0: float, message: str, n_lps: int = 0) -> FeasibleRegi
     )
 
 
-def gravito_inertial_wrench(
-    mass: float,
-    com_acc: ArrayLike = (0.0, 0.0, 0.0),
-    ang_momentum_rate: ArrayLike = (0.0, 0.0, 0.0),
-    ext_force: ArrayLike = (0.0, 0.0, 0.0),
-    ext_torque: ArrayLike = (0.0, 0.0, 0.0),
-    gravity: float = 9.81,
-    com: ArrayLike = (0.0, 0.0, 0.0),
-) -> FloatArray:
-    r"""Wrench :math:`w_{GI} = \dot h - w_G - w_{ext}` the contacts must produce (eq. 14-15), frame H.
-
-    See the module docstring for the derivation: with :math:`F = m(\ddot c - \vec g) - f_{ext}`,
-    :math:`w_{GI} = (F,\ \dot L - \tau_{ext} + c \times F)`, moments about the origin of H.
+def solve_region(
+    contacts: ContactSet,
+    legs: LegLimits,
+    load: CentroidalLoad,
+    settings: RegionSettings | None = None,
+    focus: ArrayLike | None = None,
+) -> FeasibleRegion:
+    r"""Feasible Region of the CoM (Alg. 1 of Orsolino et al.; derivation in the module docstring).
 
     Parameters
     ----------
-    mass : float
-        Total mass [kg] (> 0).
-    com_acc : (3,) array_like
-        CoM acceleration [m/s^2].
-    ang_momentum_rate : (3,) array_like
-        Rate of centroidal angular momentum :math:`\dot L` [N m].
-    ext_force, ext_torque : (3,) array_like
-        External wrench on the robot, force applied at the CoM [N], [N m].
-    gravity : float
-        Gravity magnitude [m/s^2] (> 0); gravity is (0, 0, -g) in H.
-    com : (3,) array_like
-        CoM position [m] relative to the moment reference (zero: moments about the CoM, which is how
-        :func:`fwp_feasibility` and the feasible region use it). A non-zero ``com`` evaluates the
-        state with the CoM displaced by ``com`` and everything else fixed.
+    contacts : ContactSet
+        Contact points relative to the CoM, normals, stance flags, friction coefficient and model,
+        w_M of eq. (3); frame H (origin at the CoM, z up, x-y horizontal).
+    legs : LegLimits
+        Foot Jacobians in H, torque limits and bias torques of the legs.
+    load : CentroidalLoad
+        Mass, CoM acceleration, angular-momentum rate, external wrench and gravity, frame H.
+    settings : RegionSettings, optional
+        Tolerances, program budget and clipping box; defaults if omitted.
+    focus : (2,) array_like, optional
+        A point [m] (e.g. the capture point) whose signed distance to the region is what matters:
+        the projection then refines only the part of the boundary that decides it and stops when
+        the inner and outer approximations bracket that distance within ``settings.focus_tol``
+        (``margin_bounds``); ``settings.tol`` is not used.
 
-    Returns
-    -------
-    (6,) ndarray
-        ``(force, moment)`` [N, N m].
+    Returns and raises as :func:`feasible_region` (whose keyword names the error messages use).
     """
-    m = _positive_scalar("mass", mass)
-    g = _positive_scalar("gravity", gravity)
-    vec = {}
-    for name, value in (
-        ("com_acc", com_acc),
-        ("ang_momentum_rate", ang_momentum_rate),
-        ("ext_force", ext_force),
-        ("ext_torque", ext_torque),
-        ("com", com),
-    ):
-        arr = _as_array(name, value, (3,))
-        _check_finite(name, arr)
-        vec[name] = arr
-    force = m * (vec["com_acc"] - np.array([0.0, 0.0, -g])) - vec["ext_force"]
-    # com x force, written out (np.cross has a large fixed overhead on 3-vectors; same operations).
-    (cx, cy, cz), (fx, fy, fz) = vec["com"].tolist(), force.tolist()
-    com_x_force = np.array([cy * fz - cz * fy, cz * fx - cx * fz, cx * fy - cy * fx])
-    wrench = np.empty(6)
-    wrench[:3] = force
-    wrench[3:] = vec["ang_momentum_rate"] - vec["ext_torque"] + com_x_force
-    return wrench
+    t0 = time.perf_counter()
+    s = RegionSettings() if settings is None else settings
+    feet_s, nrm, jac_s, lo, hi, bias_s, idx = validate_contact_arrays(
+        contacts.points,
+        contacts.normals,
+        contacts.stance,
+        legs.jacobians,
+        legs.torque_limits,
+        legs.leg_bias,
+        points_name="feet",
+    )
+    mu_v = positive_scalar("mu", contacts.mu)
+    tol_v = positive_scalar("tol", s.tol)
+    w_max = positive_scalar("contact_torque_limit", contacts.contact_torque_limit, allow_zero=True)
+    extent_v = positive_scalar("extent", s.extent)
+    max_lps = s.max_lps
+    if isinstance(max_lps, bool) or not isinstance(max_lps, (int, np.integer)) or max_lps < 4:
+        raise ValueError(f"max_lps must be an integer >= 4, got {max_lps!r}")
+    n_faces = parse_friction(contacts.friction)
+    wrench = load.wrench()
 
+    # Only stance feet enter the problem (validated above).
+    if idx.size == 0:
+        return _empty("empty", t0, "no stance foot")
+    force, moment = wrench[:3], wrench[3:]
+    prob = _build_problem(feet_s, nrm, mu_v, jac_s, lo, hi, bias_s, force, moment, n_faces, w_max, extent_v)
 
-def validate_contact_arrays(
-    points: ArrayLike,
-    normals: ArrayLike,
-    stance: ArrayLike,
-    jacobians: ArrayLike,
-    torque_limits: ArrayLike | tuple[ArrayLike, ArrayLike],
-    leg_bias: ArrayLike | None,
-    points_name: str = "feet",
-    min_joints: int = 1,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.intp]]:
-    """Shared input checks of the contact-based criteria (feasible region, wrench polytope).
+    oracle = _SupportOracle(prob)
+    focus_v = None
+    if focus is not None:
+        focus_arr = as_array("focus", focus, (2,))
+        check_finite("focus", focus_arr)
+        focus_v = (float(focus_arr[0]), float(focus_arr[1]))
+    focus_tol_v = positive_scalar("focus_tol", s.focus_tol)
+    proj = iterative_projection(oracle, tol=tol_v, max_evals=int(max_lps), focus=focus_v, focus_tol=focus_tol_v)
+    n_lps = oracle.n_solves
+    if proj.status in ("empty", "solver_error"):
+        msg = (
+            "equilibrium infeasible (friction/torque limits)"
+            if proj.status == "empty"
+            else "no direction could be solved"
+        )
+        return _empty(proj.status, t0, msg, n_lps)
 
-    Shapes are checked for all n contacts; values only for the stance contacts, whose rows are
-    returned: ``(points, unit normals, jacobians, torque_lo, torque_hi, leg_bias, stance_indices)``
-    (swing rows may hold anything, even NaN).
-
-    Raises:
-        ValueError: naming the malformed argument.
-    """
-    pts = _as_rows(points_name, points, 3)
-    n_all = pts.shape[0]
-    nrm = _as_array("normals", normals, (n_all, 3))
-    stance_a = np.asarray(stance)
-    if stance_a.shape != (n_all,):
-        raise ValueError(f"stance must have shape ({n_all},), got {stance_a.shape}")
-    if stance_a.dtype != np.bool_:
-        if not np.issubdtype(stance_a.dtype, np.integer) or np.any((stance_a != 0) & (stance_a != 1)):
-            raise ValueError("stance must be boolean (or 0/1 integers)")
-        stance_a = stance_a.astype(bool)
-    try:
-        jac = np.asarray(jacobians, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError("jacobians must be a numeric (n, 3, k) array") from exc
-    if jac.ndim != 3 or jac.shape[:2] != (n_all, 3) or jac.shape[2] < min_joints:
-        raise ValueError(f"jacobians must have shape ({n_all}, 3, k) with k >= {min_joints}, got {jac.shape}")
-    k = jac.shape[2]
-    idx = np.flatnonzero(stance_a)
-    lo, hi = _torque_bounds(torque_limits, n_all, k, idx)
-    bias = np.zeros((n_all, k)) if leg_bias is None else _as_array("leg_bias", leg_bias, (n_all, k))
-
-    pts_s = pts[idx]
-    _check_finite(points_name, pts_s)
-    nrm_s = nrm[idx]
-    _check_finite("normals", nrm_s)
-    lengths = np.linalg.norm(nrm_s, axis=1)
-    if (lengths < 1e-9).any():
-        raise ValueError("normals must be non-zero for stance contacts")
-    jac_s = jac[idx]
-    _check_finite("jacobians", jac_s)
-    bias_s = bias[idx]
-    _check_finite("leg_bias", bias_s)
-    return pts_s, nrm_s / lengths[:, None], jac_s, lo, hi, bias_s, idx
+    hull = convex_polygon([(x, y) for x, y in proj.points.tolist()])
+    verts = np.asarray(hull, dtype=np.float64).reshape(-1, 2)
+    notes = []
+    if proj.status == "max_lps":
+        notes.append(f"max_lps={max_lps} reached with gap {proj.gap:.3g} m^2 > tol {tol_v:.3g} m^2")
+    if proj.status == "inaccurate":
+        notes.append(f"{oracle.n_failed} direction(s) failed to solve; caps where the bisector failed too were skipped")
+    elif oracle.n_failed:
+        notes.append(f"{oracle.n_failed} direction(s) failed to solve and were replaced by their cap's bisector")
+    status = "ok"
+    if (np.abs(verts) >= extent_v - _BOX_TOL).any():
+        status = "unbounded"
+        notes.append(f"region reaches the clipping box |c| <= {extent_v} m")
+    return FeasibleRegion(
+        vertices=frozen_array(verts),
+        halfspaces=frozen_array(halfspaces_from_polygon(verts)),
+        status=status,
+        converged=bool(
+            proj.gap <= tol_v if focus_v is None else proj.margin_bounds[1] - proj.margin_bounds[0] <= focus_tol_v
+        ),
+        margin_bounds=None if focus_v is None else proj.margin_bounds,
+        n_lps=n_lps,
+        solve_time=time.perf_counter() - t0,
+        area=shoelace(hull),
+        gap=proj.gap,
+        message="; ".join(notes),
+    )
 
 
 def feasible_region(
@@ -1198,6 +621,9 @@ def feasible_region(
     focus_tol: float = DEFAULT_FOCUS_TOL,
 ) -> FeasibleRegion:
     r"""Feasible Region of the CoM (Alg. 1 of Orsolino et al.; derivation in the module docstring).
+
+    Every input as a keyword; :func:`solve_region` takes the same inputs grouped in typed dataclasses
+    and computes the result (this function only groups them).
 
     Parameters
     ----------
@@ -1260,66 +686,10 @@ def feasible_region(
     ValueError
         On malformed inputs; the message names the argument.
     """
-    t0 = time.perf_counter()
-    feet_s, nrm, jac_s, lo, hi, bias_s, idx = validate_contact_arrays(
-        feet, normals, stance, jacobians, torque_limits, leg_bias, points_name="feet"
-    )
-    mu_v = _positive_scalar("mu", mu)
-    tol_v = _positive_scalar("tol", tol)
-    w_max = _positive_scalar("contact_torque_limit", contact_torque_limit, allow_zero=True)
-    extent_v = _positive_scalar("extent", extent)
-    if isinstance(max_lps, bool) or not isinstance(max_lps, (int, np.integer)) or max_lps < 4:
-        raise ValueError(f"max_lps must be an integer >= 4, got {max_lps!r}")
-    n_faces = _parse_friction(friction)
-    wrench = gravito_inertial_wrench(mass, com_acc, ang_momentum_rate, ext_force, ext_torque, gravity)
-
-    # Only stance feet enter the problem (validated above).
-    if idx.size == 0:
-        return _empty("empty", t0, "no stance foot")
-    force, moment = wrench[:3], wrench[3:]
-    prob = _build_problem(feet_s, nrm, mu_v, jac_s, lo, hi, bias_s, force, moment, n_faces, w_max, extent_v)
-
-    oracle = _SupportOracle(prob)
-    focus_v = None
-    if focus is not None:
-        focus_arr = _as_array("focus", focus, (2,))
-        _check_finite("focus", focus_arr)
-        focus_v = (float(focus_arr[0]), float(focus_arr[1]))
-    focus_tol_v = _positive_scalar("focus_tol", focus_tol)
-    proj = iterative_projection(oracle, tol=tol_v, max_evals=int(max_lps), focus=focus_v, focus_tol=focus_tol_v)
-    n_lps = oracle.n_solves
-    if proj.status in ("empty", "solver_error"):
-        msg = (
-            "equilibrium infeasible (friction/torque limits)"
-            if proj.status == "empty"
-            else "no direction could be solved"
-        )
-        return _empty(proj.status, t0, msg, n_lps)
-
-    hull = _convex_polygon([(x, y) for x, y in proj.points.tolist()])
-    verts = np.asarray(hull, dtype=np.float64).reshape(-1, 2)
-    notes = []
-    if proj.status == "max_lps":
-        notes.append(f"max_lps={max_lps} reached with gap {proj.gap:.3g} m^2 > tol {tol_v:.3g} m^2")
-    if proj.status == "inaccurate":
-        notes.append(f"{oracle.n_failed} direction(s) failed to solve; caps where the bisector failed too were skipped")
-    elif oracle.n_failed:
-        notes.append(f"{oracle.n_failed} direction(s) failed to solve and were replaced by their cap's bisector")
-    status = "ok"
-    if (np.abs(verts) >= extent_v - _BOX_TOL).any():
-        status = "unbounded"
-        notes.append(f"region reaches the clipping box |c| <= {extent_v} m")
-    return FeasibleRegion(
-        vertices=_frozen(verts),
-        halfspaces=_frozen(halfspaces_from_polygon(verts)),
-        status=status,
-        converged=bool(
-            proj.gap <= tol_v if focus_v is None else proj.margin_bounds[1] - proj.margin_bounds[0] <= focus_tol_v
-        ),
-        margin_bounds=None if focus_v is None else proj.margin_bounds,
-        n_lps=n_lps,
-        solve_time=time.perf_counter() - t0,
-        area=_shoelace(hull),
-        gap=proj.gap,
-        message="; ".join(notes),
+    return solve_region(
+        ContactSet(feet, normals, stance, mu, friction, contact_torque_limit),
+        LegLimits(jacobians, torque_limits, leg_bias),
+        CentroidalLoad(mass, com_acc, ang_momentum_rate, ext_force, ext_torque, gravity),
+        RegionSettings(tol=tol, max_lps=max_lps, extent=extent, focus_tol=focus_tol),
+        focus,
     )

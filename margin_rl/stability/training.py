@@ -36,10 +36,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from margin_rl.dataset import Dataset, load_dataset
 from margin_rl.provenance import git_commit
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
+from margin_rl.stability.dataset import Dataset, load_dataset
 from margin_rl.stability.evaluation import evaluate as evaluate_protocol
 from margin_rl.stability.evaluation import reliability
 from margin_rl.stability.lambda_state import LAMBDA_SLICES, lambda_names, mirror_lambda
@@ -395,7 +395,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m margin_rl.stability.training", description=__doc__.split("\n\n")[0]
     )
-    parser.add_argument("--data", required=True, help="dataset directory (python -m margin_rl.dataset generate)")
+    parser.add_argument(
+        "--data", required=True, help="dataset directory (python -m margin_rl.stability.dataset generate)"
+    )
     parser.add_argument("--out", required=True, help="output path without suffix: writes <out>.npz and <out>.json")
     defaults = TrainConfig()
     parser.add_argument("--epochs", type=int, default=defaults.epochs)

@@ -185,8 +185,8 @@ def test_bundled_weights_load_and_track_the_analytic_margin(robot: str) -> None:
 
 
 def test_training_end_to_end_writes_a_complete_card(tmp_path: Path) -> None:
-    from margin_rl.dataset import DatasetSpec, generate
     from margin_rl.stability.analytic import AnalyticSettings
+    from margin_rl.stability.dataset import DatasetSpec, generate
     from margin_rl.stability.training import TrainConfig, train
 
     data = tmp_path / "data"
@@ -204,7 +204,7 @@ def test_training_end_to_end_writes_a_complete_card(tmp_path: Path) -> None:
         "sha256",
     ):
         assert key in card, key
-    assert "margin_rl.dataset generate --robot anymal_b --n 120" in card["dataset"]["generation_command"]
+    assert "margin_rl.stability.dataset generate --robot anymal_b --n 120" in card["dataset"]["generation_command"]
     assert set(card["test_metrics"]) >= {"rmse_cm", "sign_agreement", "rmse_cm_by_acc_xy_band"}
     assert card["paper_protocol"]["reliability"]["states_drawn"] == 40
     assert card["paper_protocol"]["analytic_settings"] == card["analytic_settings"]

@@ -15,7 +15,15 @@ from hypothesis import strategies as st
 from scipy.optimize import linprog
 
 from margin_rl.stability import region as fr
+from margin_rl.stability.contact import (
+    gravito_inertial_wrench,
+    parse_friction,
+    solver_settings,
+    tangent_bases,
+    validate_contact_arrays,
+)
 from margin_rl.stability.icp import stability_margin
+from margin_rl.stability.polygon import convex_polygon
 from margin_rl.stability.region import (
     DEFAULT_CONTACT_TORQUE_LIMIT,
     SUPPORT_FAILED,
@@ -582,22 +590,22 @@ def test_polygon_cleanup_is_robust_to_order_and_noise() -> None:
     pts = [corners[i] + t * (corners[(i + 1) % 4] - corners[i]) for i in range(4) for t in np.linspace(0, 1, 7)]
     pts = np.array(pts) + rng.normal(scale=1e-11, size=(28, 2))
     rng.shuffle(pts)
-    out = np.array(fr._convex_polygon([tuple(p) for p in pts]))
+    out = np.array(convex_polygon([tuple(p) for p in pts]))
     assert_same_polygon(out, corners, atol=1e-9)
     assert polygon_area(out) > 0
     # A spike back along an edge (a sub-optimal point) never survives.
     spiky = [(0.0, 0.0), (1.0, 0.0), (0.5, 1e-3), (1.0 + 1e-7, 1e-7), (1.0, 1.0), (0.0, 1.0)]
-    assert len(fr._convex_polygon(spiky)) == 4
+    assert len(convex_polygon(spiky)) == 4
     # Nearly collinear points: the extreme pair.
     line = [(t, 2 * t + 1e-12 * math.sin(50 * t)) for t in rng.permutation(np.linspace(-1, 1, 9))]
-    assert_same_polygon(np.array(fr._convex_polygon(line)), np.array([[-1.0, -2.0], [1.0, 2.0]]), atol=1e-9)
-    assert len(fr._convex_polygon([(0.1, 0.2), (0.1 + 1e-9, 0.2)])) == 1
+    assert_same_polygon(np.array(convex_polygon(line)), np.array([[-1.0, -2.0], [1.0, 2.0]]), atol=1e-9)
+    assert len(convex_polygon([(0.1, 0.2), (0.1 + 1e-9, 0.2)])) == 1
 
 
 def test_failed_fast_solves_are_retried_with_the_robust_solver(monkeypatch: pytest.MonkeyPatch) -> None:
     kw = C.quadruped_case(torque_limit=30.0)
     ref = feasible_region(**kw)
-    crippled = fr._settings(robust=False)
+    crippled = solver_settings(robust=False)
     crippled.max_iter = 2  # every fast solve stops with MaxIterations
     monkeypatch.setattr(fr, "_FAST_SETTINGS", crippled)
     r = feasible_region(**kw)
@@ -647,7 +655,7 @@ def reference_problem(args: tuple[Any, ...]) -> tuple[Any, np.ndarray, list[str]
     tau = block_diag(np.concatenate([jt, -jt], axis=1))
     tau_b = np.concatenate([bias - lo, hi - bias], axis=1).ravel()
     finite = np.isfinite(tau_b)
-    t1, t2 = fr._tangent_bases(normals)
+    t1, t2 = tangent_bases(normals)
     if n_faces:
         th = 2.0 * np.pi * np.arange(n_faces) / n_faces
         d = np.cos(th)[None, :, None] * t1[:, None, :] + np.sin(th)[None, :, None] * t2[:, None, :]
@@ -677,13 +685,13 @@ def test_problem_assembly_matches_the_plain_reference(
         lo, hi = -kw["torque_limits"], kw["torque_limits"].copy()
         lo[0, 1], hi[3, 2] = -np.inf, np.inf
         kw["torque_limits"] = (lo, hi)
-    feet, nrm, jac, lo, hi, bias, _ = fr.validate_contact_arrays(
+    feet, nrm, jac, lo, hi, bias, _ = validate_contact_arrays(
         kw["feet"], kw["normals"], kw["stance"], kw["jacobians"], kw["torque_limits"], None
     )
-    wrench = fr.gravito_inertial_wrench(
+    wrench = gravito_inertial_wrench(
         kw["mass"], kw["com_acc"], kw["ang_momentum_rate"], kw["ext_force"], kw["ext_torque"], G
     )
-    args = (feet, nrm, kw["mu"], jac, lo, hi, bias, wrench[:3], wrench[3:], fr._parse_friction(friction), WM, 10.0)
+    args = (feet, nrm, kw["mu"], jac, lo, hi, bias, wrench[:3], wrench[3:], parse_friction(friction), WM, 10.0)
     prob = fr._build_problem(*args)
     a_ref, b_ref, cones_ref = reference_problem(args)
     assert prob.A.shape == a_ref.shape and prob.n_var == a_ref.shape[1]

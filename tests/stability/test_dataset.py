@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from margin_rl.dataset import DatasetError, DatasetSpec, generate, load_dataset, main, shard_path
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin
+from margin_rl.stability.dataset import DatasetError, DatasetSpec, generate, load_dataset, main, shard_path
 
 SPEC = DatasetSpec(robot="anymal_b", n=50, shard_size=20, seed=3, settings=AnalyticSettings())
 

@@ -4,28 +4,43 @@ ANYmal walks at a commanded heading velocity (0.75 m/s by default) with the rewa
 
     r = L(8 (v_cmd - x_dot)) + w_m m(lambda),     L(x) = (e^-x + 2 + e^x)^-1,
 
-where x_dot is the heading velocity in the base frame and m the learned stability margin of the robot
-(``margin="learned"``, default), the analytic one (``margin="analytic"``, slow: for validating the
-learned term in the loop) or none; ``margin_weight=0`` is the baseline of the with/without comparison.
-``reward_preset="shaped"`` adds the usual locomotion regularisers (torques, action rate, orientation,
-feet air time, collisions, ...); between "with" and "without margin" only the margin term differs.
+where x_dot is the heading velocity in the base frame and m the stability margin of the robot, one of
+:data:`margin_rl.envs.margin_kinds.MARGIN_KINDS` (``EnvConfig.margin``):
 
-* Action: 12 joint-position offsets in [-1, 1] (clipped; NaN raises ValueError), times
-  ``action_scale`` [rad], around the standing keyframe's equilibrium servo targets; PD through the
-  MJCF's position actuators (force-limited to the torque limits) at the physics rate, 50 Hz policy.
+* ``"learned"`` (default): the learned margin MLP of seed 000 §IV [m], batched, fast;
+* ``"analytic"``: the analytic margin of seed 000 §III [m], per environment, slow (validates the learned term);
+* ``"fwp"``: the feasible-wrench-polytope feasibility factor s of seed 004 (dimensionless, s <= 1), per
+  environment, slower still;
+* ``"none"``: no margin term.
+
+``margin_weight=0`` is the baseline of the with/without comparison. ``reward_preset="shaped"`` adds the
+usual locomotion regularisers (torques, action rate, orientation, feet air time, collisions, ...); between
+"with" and "without margin" only the margin term differs.
+
+* Action: 12 joint-position offsets, shape (12,), times ``action_scale`` [rad], around the standing
+  keyframe's equilibrium servo targets; PD through the MJCF's position actuators (force-limited to the
+  torque limits) at the physics rate, 50 Hz policy. Clipping policy: values outside the action space
+  [-1, 1] are clipped to it without a warning (as SB3 does with its policies' samples), so a = 5 acts as
+  a = 1; NaN or inf, a wrong shape or a non-numeric dtype raise ValueError/TypeError naming the
+  expected shape. ``step()`` before the first ``reset()`` raises ``gymnasium.error.ResetNeeded``.
 * Observation (48, float32, :data:`margin_rl.envs.observations.POLICY_OBSERVATIONS`, see
   ``observation_structure``): base linear and angular velocity (base frame), projected gravity, command,
-  joint positions relative to standing, joint velocities, previous action.
+  joint positions relative to standing, joint velocities, previous action. Its bounds are ±inf: velocities
+  have no physical bound short of the divergence check, and Gymnasium's MuJoCo robots do the same.
 * Episode: 20 s (TimeLimit, 1000 steps); terminated on base or thigh contact with the terrain, base
   height below 0.25 m above the terrain, tilt above 1 rad, or a diverged simulation
-  (``info["diverged"]``).
+  (``info["diverged"]``). A non-finite reward or observation is never returned: it raises FloatingPointError.
 * ``info``: every weighted reward term as ``reward_<term>`` (their sum is the reward), ``margin``,
   ``base_lin_acc`` and ``base_ang_acc`` (base frame; finite differences over the policy step),
   ``base_lin_vel``, ``velocity_error``, ``contacts``, ``stance_width``, ``fell``, ``diverged``.
 * Options: ``config=EnvConfig(...)`` or any EnvConfig field as a keyword (``margin_weight``,
   ``reward_preset``, ``randomization=RandomizationConfig(friction=(0.4, 1.0), push_interval_s=5.0,
-  observation_noise=1.0, ...)``, ``command=CommandConfig(forward_velocity=(0.25, 1.0))``), plus
-  ``render_mode`` ("rgb_array", "human"), ``width``, ``height``.
+  observation_noise=1.0, ...)``, ``command=CommandConfig(forward_velocity=(0.25, 1.0))``), each checked
+  when the config is built, plus ``render_mode``, ``width``, ``height``.
+* Rendering: ``"rgb_array"`` everywhere (headless: ``MUJOCO_GL=egl`` or ``osmesa``); ``"human"`` (MuJoCo's
+  passive viewer) only where a display can open: ``metadata["render_modes"]`` of an instance lists it only
+  when a display is configured, and asking for it without one raises :class:`DisplayUnavailableError`
+  (MuJoCo's viewer would otherwise end the process from its GLFW thread, with nothing to catch).
 
 Version history:
 * v0: initial release.
@@ -33,19 +48,32 @@ Version history:
 
 from __future__ import annotations
 
+import os
+import sys
+import warnings
 from typing import Any
 
 import gymnasium
+import mujoco
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 
-from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.config import EnvConfig, check_int
 from margin_rl.envs.core import AnymalCore
 from margin_rl.envs.observations import observation_size, observation_structure
+
+ACTION_SIZE = 12
+"""One joint-position offset per joint (4 legs x HAA, HFE, KFE)."""
 
 
 def make_config(config: EnvConfig | None, robot: str, terrain: str, overrides: dict[str, Any]) -> EnvConfig:
     """The environment config: ``config`` (or the defaults for robot/terrain) with keyword overrides."""
+    if config is not None and not isinstance(config, EnvConfig):
+        raise TypeError(
+            f"config must be an EnvConfig or None, got {type(config).__name__}; pass config=EnvConfig(...) "
+            "or the fields as keywords"
+        )
     base = config if config is not None else EnvConfig(robot=robot, terrain=terrain)
     unknown = set(overrides) - set(EnvConfig.__dataclass_fields__)
     if unknown:
@@ -55,9 +83,157 @@ def make_config(config: EnvConfig | None, robot: str, terrain: str, overrides: d
     return base.replace(**overrides) if overrides else base
 
 
+# ---------------------------------------------------------------------------------------------------------------------
+# checks of the public surface, shared with the batched env (margin_rl.envs.vector)
+# ---------------------------------------------------------------------------------------------------------------------
+def check_actions(actions: object, shape: tuple[int, ...], hint: str) -> np.ndarray:
+    """``actions`` as float64 of exactly ``shape``, or a TypeError/ValueError naming the expected shape.
+
+    Finite values are returned unchanged (the core clips them to [-1, 1]); ``hint`` says what to do instead.
+    """
+    expected = f"a float array of shape {shape} (joint-position offsets in [-1, 1], clipped outside)"
+    try:
+        raw = np.asarray(actions)
+    except (TypeError, ValueError) as exc:  # ragged nested sequences
+        raise ValueError(f"actions must be {expected}, got {actions!r}: {exc}; {hint}") from exc
+    if raw.dtype.kind not in "iuf":  # strings, objects, bools and complex numbers are not joint offsets
+        raise TypeError(f"actions must be {expected}, got dtype {raw.dtype} ({type(actions).__name__}); {hint}")
+    if raw.shape != shape:
+        raise ValueError(f"actions must be {expected}, got shape {raw.shape}; {hint}")
+    values = raw.astype(np.float64)
+    if not np.all(np.isfinite(values)):
+        bad = np.argwhere(~np.isfinite(values)).tolist()
+        raise ValueError(f"actions contain NaN or inf at {bad}; actions must be finite ({expected})")
+    return values
+
+
+def check_seed(seed: object, where: str = "seed") -> int | None:
+    """``seed`` as a Python int (numpy integers accepted) or None; TypeError/ValueError otherwise."""
+    if seed is None:
+        return None
+    check_int(where, seed, minimum=0, hint="None, or a non-negative int for a reproducible reset")
+    return int(seed)
+
+
+def check_reset_options(options: object, owner: str) -> None:
+    """The ANYmal environments take no reset options: any given would be silently ignored otherwise."""
+    if options is None or (isinstance(options, dict) and not options):
+        return
+    raise ValueError(
+        f"{owner}.reset takes no options, got {options!r}; set environment options when it is built "
+        "(gymnasium.make(..., margin_weight=...)) instead"
+    )
+
+
+def check_finite_outputs(observation: np.ndarray, reward: np.ndarray | float, config: EnvConfig) -> None:
+    """FloatingPointError if a reward or an observation is NaN or inf.
+
+    The core keeps diverged simulations finite (and flags them in ``info["diverged"]``); what is left is a
+    setting so large that float arithmetic overflows, which no agent should train on.
+    """
+    if np.all(np.isfinite(observation)) and np.all(np.isfinite(reward)):
+        return
+    rnd = config.randomization
+    what = "observation" if not np.all(np.isfinite(observation)) else "reward"
+    raise FloatingPointError(
+        f"the {what} is not finite: an EnvConfig value is too large for float arithmetic "
+        f"(margin_weight={config.margin_weight}, alive_bonus={config.alive_bonus}, "
+        f"randomization.observation_noise={rnd.observation_noise}, reset_velocity_noise={rnd.reset_velocity_noise}); "
+        "use values of the order of the defaults"
+    )
+
+
+def check_frame_size(width: object, height: object) -> None:
+    check_int("width", width, minimum=1, hint="frame width [pixels]")
+    check_int("height", height, minimum=1, hint="frame height [pixels]")
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# rendering
+# ---------------------------------------------------------------------------------------------------------------------
+class DisplayUnavailableError(RuntimeError):
+    """``render_mode="human"`` was asked for where MuJoCo's viewer cannot open a window."""
+
+
+HEADLESS_ADVICE = (
+    "on a headless machine use render_mode='rgb_array' (MUJOCO_GL=egl or osmesa) and keep the frames, e.g. "
+    "with gymnasium.wrappers.RecordVideo, or run under a virtual display (xvfb-run)"
+)
+
+
+def display_unavailable_reason() -> str | None:
+    """Why MuJoCo's interactive viewer cannot open here, or None where it may (a cheap check, opens nothing)."""
+    if sys.platform == "darwin":
+        # launch_passive needs the UI thread that only the `mjpython` launcher provides on macOS.
+        viewer = sys.modules.get("mujoco.viewer")
+        if getattr(viewer, "_MJPYTHON", None) is None:
+            return "on macOS MuJoCo's viewer needs the script to run under `mjpython`"
+        return None
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        return "no display: neither DISPLAY nor WAYLAND_DISPLAY is set"
+    return None
+
+
+def require_display() -> None:
+    """DisplayUnavailableError unless GLFW (MuJoCo's viewer backend) can open the display.
+
+    MuJoCo's passive viewer starts GLFW on its own thread and, when that fails, ends the process with status
+    1 and no Python exception; so GLFW is started here first, where a failure can be raised.
+    """
+    reason = display_unavailable_reason()
+    if reason is None and sys.platform != "darwin":  # under mjpython GLFW belongs to the UI thread
+        import glfw
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                started = glfw.init()
+            except Exception as exc:  # glfw.ERROR_REPORTING = "raise" turns the failure into an exception
+                started, caught = False, [exc]
+        if not started:
+            detail = "; ".join(str(getattr(w, "message", w)) for w in caught) or "glfw.init() failed"
+            reason = f"GLFW cannot open the display {os.environ.get('DISPLAY', '')!r} ({detail})"
+    if reason is not None:
+        raise DisplayUnavailableError(f"render_mode='human' needs a display: {reason}; {HEADLESS_ADVICE}")
+
+
+def available_render_modes() -> list[str]:
+    """The render modes an environment built now can honour (``"human"`` only with a display)."""
+    return ["human", "rgb_array"] if display_unavailable_reason() is None else ["rgb_array"]
+
+
+class FrameRenderer:
+    """RGB frames of the environments of an :class:`AnymalCore`, from a camera that follows each base."""
+
+    def __init__(self, core: AnymalCore, width: int, height: int) -> None:
+        self.core, self.width, self.height = core, width, height
+        self._renderer: mujoco.Renderer | None = None
+        self._camera = mujoco.MjvCamera()
+        self._camera.distance, self._camera.elevation, self._camera.azimuth = 2.5, -20.0, 120.0
+
+    def frame(self, env: int) -> np.ndarray:
+        """(height, width, 3) uint8 image of environment ``env``."""
+        if self._renderer is None:  # built on first use: it needs an OpenGL context (MUJOCO_GL)
+            self._renderer = mujoco.Renderer(self.core.model, self.height, self.width)
+        data = self.core.render_data(env)
+        self._camera.lookat[:] = data.qpos[:3]
+        self._renderer.update_scene(data, self._camera)
+        return self._renderer.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# the environment
+# ---------------------------------------------------------------------------------------------------------------------
 class AnymalEnv(gymnasium.Env):
     """ANYmal B/C locomotion with a stability-margin reward (see the module docstring)."""
 
+    # The class lists every mode so that gymnasium.make passes render_mode="human" on to the constructor
+    # (which then opens the viewer or raises DisplayUnavailableError); an instance lists what works here.
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 50}
 
     def __init__(
@@ -72,29 +248,46 @@ class AnymalEnv(gymnasium.Env):
     ) -> None:
         self.config = make_config(config, robot, terrain, overrides)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        check_frame_size(width, height)
+        if render_mode == "human":
+            require_display()
         self.core = AnymalCore(self.config, num_envs=1, autoreset=False, truncate=False)
-        self.metadata = {**self.metadata, "render_fps": round(1.0 / self.core.dt)}
+        self.metadata = {**self.metadata, "render_modes": available_render_modes(), "render_fps": round(1.0 / self.dt)}
         self.observation_space = spaces.Box(-np.inf, np.inf, (observation_size(),), np.float32)
-        self.action_space = spaces.Box(-1.0, 1.0, (12,), np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
         self.observation_structure = observation_structure()
         self.render_mode, self.width, self.height = render_mode, width, height
-        self._renderer = None
+        self._frames = FrameRenderer(self.core, width, height)
         self._viewer = None
+        self._needs_reset = True
 
     @property
     def dt(self) -> float:
         return self.core.dt
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
+        seed = check_seed(seed)
+        check_reset_options(options, type(self).__name__)
         super().reset(seed=seed)
         self.core.reset(seed=seed)
-        return self.core.observe_all()[0], {}
+        observation = self.core.observe_all()[0]
+        check_finite_outputs(observation, 0.0, self.config)
+        self._needs_reset = False
+        return observation, {}
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        out = self.core.step(np.asarray(action, dtype=np.float64)[None])
+        if self._needs_reset:
+            raise ResetNeeded("AnymalEnv.step() was called before reset(); call env.reset(seed=...) first")
+        action = check_actions(
+            action,
+            (ACTION_SIZE,),
+            "one environment takes one action of 12 numbers (use gymnasium.make_vec for a batch)",
+        )
+        out = self.core.step(action[None])
         info = {k: (v[0] if v.ndim == 1 else v[0].copy()) for k, v in out.info.items()}
         info = {k: float(v) if np.ndim(v) == 0 else v for k, v in info.items()}
+        check_finite_outputs(out.observation[0], out.reward[0], self.config)
         if self.render_mode == "human":
             self.render()
         return out.observation[0], float(out.reward[0]), bool(out.terminated[0]), False, info
@@ -103,28 +296,24 @@ class AnymalEnv(gymnasium.Env):
         if self.render_mode is None:
             gymnasium.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
             return None
-        import mujoco
+        if self._needs_reset:
+            raise ResetNeeded("AnymalEnv.render() was called before reset(); call env.reset(seed=...) first")
+        if self.render_mode == "rgb_array":
+            return self._frames.frame(0)
+        if self._viewer is None:
+            import mujoco.viewer
 
-        data = self.core.render_data(0)
-        if self.render_mode == "human":
-            if self._viewer is None:
-                import mujoco.viewer
-
-                self._viewer = mujoco.viewer.launch_passive(self.core.model, data)
-            self._viewer.sync()
-            return None
-        if self._renderer is None:
-            self._renderer = mujoco.Renderer(self.core.model, self.height, self.width)
-            self._camera = mujoco.MjvCamera()
-            self._camera.distance, self._camera.elevation, self._camera.azimuth = 2.5, -20.0, 120.0
-        self._camera.lookat[:] = data.qpos[:3]
-        self._renderer.update_scene(data, self._camera)
-        return self._renderer.render()
+            self._viewer = mujoco.viewer.launch_passive(self.core.model, self.core.render_data(0))
+        else:  # the viewer shows the MjData it was given: copy the current state into it
+            data = self.core.render_data(0)
+            with self._viewer.lock():
+                self._viewer.d.qpos[:], self._viewer.d.qvel[:] = data.qpos, data.qvel
+                mujoco.mj_forward(self.core.model, self._viewer.d)
+        self._viewer.sync()
+        return None
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._frames.close()
         if self._viewer is not None:
             self._viewer.close()
             self._viewer = None

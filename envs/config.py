@@ -84,7 +84,9 @@ def _parses(value: object) -> bool:
         return False
 
 
-def check_int(where: str, value: object, *, minimum: int | None = None, maximum: int | None = None, hint: str = "") -> None:
+def check_int(
+    where: str, value: object, *, minimum: int | None = None, maximum: int | None = None, hint: str = ""
+) -> None:
     """TypeError unless ``value`` is an integer (Python or numpy, not bool); ValueError outside the bounds."""
     bounds = _bounds_text(minimum, maximum, False, False)
     wanted = "an int" + (f" {bounds}" if bounds else "") + (f" ({hint})" if hint else "")
@@ -132,7 +134,8 @@ def check_instance(where: str, value: object, cls: type, hint: str) -> None:
 
 
 def check_terrain_config(config: TerrainConfig) -> None:
-    """Check a :class:`TerrainConfig` (called from its ``__post_init__``; lives here with the other checks)."""
+    """Check a :class:`TerrainConfig`; :class:`EnvConfig` calls it (terrain.py is imported by this module, so
+    it cannot import these checks back without an import cycle)."""
     where = "TerrainConfig"
     check_number(f"{where}.size", config.size, minimum=0.0, min_open=True, hint="side of the square terrain [m]")
     check_number(f"{where}.resolution", config.resolution, minimum=0.0, min_open=True, hint="grid spacing [m]")
@@ -151,8 +154,10 @@ def check_terrain_config(config: TerrainConfig) -> None:
         hint="vertical extent of the heightfield [m], above base_level",
     )
     # The generator lays whole tiles of whole grid cells; other ratios would not fill the grid.
-    for name, outer, inner in (("size / tile", config.size, config.tile), ("tile / resolution", config.tile,
-                                                                           config.resolution)):
+    for name, outer, inner in (
+        ("size / tile", config.size, config.tile),
+        ("tile / resolution", config.tile, config.resolution),
+    ):
         ratio = outer / inner
         if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio):
             raise ValueError(
@@ -165,6 +170,7 @@ def check_terrain_config(config: TerrainConfig) -> None:
             f"{where}: size / resolution gives a {side} x {side} heightfield, more than {MAX_TERRAIN_GRID_SIDE} "
             f"per side; use a coarser resolution or a smaller size (lengths are in metres)"
         )
+
 
 REWARD_PRESETS: dict[str, dict[str, float]] = {
     # Seed 000 §V-C exactly: logistic velocity kernel plus the (weighted) learned margin.
@@ -224,7 +230,11 @@ class RandomizationConfig:
             check_range_pair(f"{where}.added_base_mass", self.added_base_mass, hint="[kg], or None")
         if self.push_interval_s is not None:
             check_number(
-                f"{where}.push_interval_s", self.push_interval_s, minimum=0.0, min_open=True, hint="[s], None: no pushes"
+                f"{where}.push_interval_s",
+                self.push_interval_s,
+                minimum=0.0,
+                min_open=True,
+                hint="[s], None: no pushes",
             )
         check_number(f"{where}.push_force", self.push_force, minimum=0.0, hint="[N]")
         check_number(f"{where}.push_duration_s", self.push_duration_s, minimum=0.0, min_open=True, hint="[s]")
@@ -245,7 +255,11 @@ class TerminationConfig:
         check_number("TerminationConfig.min_base_height", self.min_base_height, minimum=0.0, hint="[m]")
         # Tilt is an angle to the vertical, at most pi: a larger bound is a degrees-for-radians slip.
         check_number(
-            "TerminationConfig.max_tilt_rad", self.max_tilt_rad, minimum=0.0, maximum=math.pi, min_open=True,
+            "TerminationConfig.max_tilt_rad",
+            self.max_tilt_rad,
+            minimum=0.0,
+            maximum=math.pi,
+            min_open=True,
             hint="[rad]; pi never ends an episode on tilt",
         )
 
@@ -289,6 +303,7 @@ class EnvConfig:
             value = getattr(self, name)
             built = f"{name}={cls.__name__}(**{value!r})" if isinstance(value, dict) else f"{name}={cls.__name__}(...)"
             check_instance(f"{where}.{name}", value, cls, f"pass {built}")
+        check_terrain_config(self.terrain_config)
         check_int(f"{where}.decimation", self.decimation, minimum=1, hint="physics steps per policy step")
         check_number(f"{where}.action_scale", self.action_scale, minimum=0.0, min_open=True, hint="[rad] per unit")
         check_number(f"{where}.episode_length_s", self.episode_length_s, minimum=0.0, min_open=True, hint="[s]")
@@ -301,7 +316,11 @@ class EnvConfig:
         # L is even (L(x) = L(-x)), so only the gain's size matters; 0 would make the velocity term constant.
         check_number(f"{where}.logistic_gain", self.logistic_gain, minimum=0.0, min_open=True, hint="[s/m]")
         check_number(
-            f"{where}.acceleration_filter", self.acceleration_filter, minimum=0.0, maximum=1.0, max_open=True,
+            f"{where}.acceleration_filter",
+            self.acceleration_filter,
+            minimum=0.0,
+            maximum=1.0,
+            max_open=True,
             hint="EMA factor, 0: no filter",
         )
         if not isinstance(self.privileged_observations, (bool, np.bool_)):

@@ -299,7 +299,9 @@ class AnymalCore:
 
     def _actuate(self, actions: np.ndarray) -> np.ndarray:
         """Clip the actions, write the servo targets and this step's pushes; returns the clipped actions."""
-        a = np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 12)
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape != (self.num_envs, 12):
+            raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise ValueError("actions contain NaN or inf")
         a = np.clip(a, -1.0, 1.0)

@@ -45,7 +45,7 @@ ALLOWED: dict[str, set[str]] = {
 """Layer -> the layers its modules may import."""
 
 FORBIDDEN_THIRD_PARTY = {"envs": ("stable_baselines3", "rsl_rl"), "stability": ("gymnasium",), "robot": ("torch",)}
-ROBOT_AGNOSTIC = ("contact", "polygon", "projection", "region", "icp")
+ROBOT_AGNOSTIC = ("contact", "polygon", "projection", "region", "icp", "wrench_polytope", "wrench_lp")
 """Modules of margin_rl.stability that hold the robot-agnostic criteria."""
 
 

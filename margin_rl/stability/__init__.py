@@ -2,12 +2,14 @@
 
 Robot-agnostic core (arrays in, arrays out; never imports margin_rl.robot)::
 
-    contact      the contact problem both criteria share: ContactSet, LegLimits, CentroidalLoad, the input
-                 checks, tangent bases, the gravito-inertial wrench, the Clarabel settings and statuses
-    polygon      planar convex polygons: caps, hull, area, half-spaces (eq. 6)
-    projection   iterative_projection: one loop of Alg. 1, stopping on the area or on a focus point's bracket
-    region       feasible_region(...) / solve_region(contacts, legs, load) -> FeasibleRegion (conic program)
-    icp          capture_point (eq. 5), stability_margin (eq. 7)
+    contact          the contact problem both criteria share: ContactSet, LegLimits, CentroidalLoad, the input
+                     checks, tangent bases, the gravito-inertial wrench, the Clarabel settings and statuses
+    polygon          planar convex polygons: caps, hull, area, half-spaces (eq. 6)
+    projection       iterative_projection: one loop of Alg. 1, stopping on the area or on a focus point's bracket
+    region           feasible_region(...) / solve_region(contacts, legs, load) -> FeasibleRegion (conic program)
+    icp              capture_point (eq. 5), stability_margin (eq. 7)
+    wrench_polytope  feasible_wrench_polytope(...) -> FeasibleWrenchPolytope: bounded friction cones, Minkowski sum
+    wrench_lp        the FWP's small Clarabel programs: gauge and polar support (eq. 24), residuals, cone depth
 
 Robot layer (lambda in R^47, eq. 4)::
 

@@ -165,8 +165,8 @@ def cli_fingerprints(work: Path) -> dict[str, str]:
     for backend, extra in (("rsl", []), ("sb3", ["--ppo-option", "n_steps=64"])):
         run_dir = work / f"train_{backend}"
         _run(["-m", "margin_rl.train.train", "--env", "margin_rl/AnymalB-v0", "--backend", backend, "--seed", "1",
-              "--num-envs", "8", "--total-steps", "1024", "--margin-weight", "0.2", "--run-dir", str(run_dir),
-              "--no-progress", *extra], work)
+              "--num-envs", "8", "--total-steps", "1024", "--margin-weight", "0.2", "--env-option", "alive_bonus=0",
+              "--run-dir", str(run_dir), "--no-progress", *extra], work)
         import torch
 
         policy = torch.jit.load(str(run_dir / "policy_torchscript.pt"))

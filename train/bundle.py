@@ -28,6 +28,8 @@ from pathlib import Path
 from typing import Any
 
 from margin_rl.provenance import sha256_file
+from margin_rl.stability.learned import LearnedMargin, weights_path
+from margin_rl.train.metrics import summary_table
 from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, TORCHSCRIPT_FILE, read_json, write_json
 
 BUNDLE_ROOT = Path(__file__).resolve().parent / "bundled"
@@ -143,8 +145,6 @@ def copy_margin_weights(entries: list[dict[str, Any]], folder: Path) -> dict[str
         ValueError: the runs used different weights (one bundle carries one margin model), or the weights
             changed since training (their checksum no longer matches the one recorded for the runs).
     """
-    from margin_rl.stability.learned import LearnedMargin, weights_path
-
     identities = {
         (e["learned_margin"]["source"], e["learned_margin"]["sha256"]) for e in entries if e["learned_margin"]
     }
@@ -172,8 +172,6 @@ def margin_model_identity(run_config: dict[str, Any]) -> dict[str, Any] | None:
     """Which learned margin a run's environment used: {"source": robot name or weights path, "sha256": of the
     weights}, or None when the run used no learned margin. Stored per policy in the card, so that evaluating
     a bundled policy with other margin weights than it was trained with can be detected."""
-    from margin_rl.stability import LearnedMargin
-
     env = run_config.get("env_config") or {}
     if env.get("margin") != "learned":
         return None
@@ -275,8 +273,6 @@ def _replace_folder(new: Path, dest: Path) -> None:
 
 def card_markdown(card: dict[str, Any]) -> str:
     """The card for people: what was trained, how, from which commit, and the measured table."""
-    from margin_rl.train.metrics import summary_table
-
     s, p = card["settings"], card["provenance"]
     lines = [
         f"# Policy bundle `{card['name']}`",

@@ -3,7 +3,10 @@
 Example::
 
     python -m margin_rl.train.compare --env margin_rl/AnymalB-v0 --backend rsl --seeds 3 \\
-        --total-steps 5000000 --margin-weight 1.0 --out runs/compare_b
+        --total-steps 5000000 --margin-weight 0.2 --env-option alive_bonus=0.1 --out runs/compare_b
+
+For the ANYmal ids, ``--margin-weight`` defaults to 0.2 and ``--env-option alive_bonus`` to 0.1 for both
+variants: the shipped experiment (see :mod:`margin_rl.train.cli`).
 
 For each variant (margin weight 0, and ``--margin-weight``) and each training seed, a run is trained into
 ``<out>/runs/mw<weight>__s<seed>`` (a finished run is reused, a stopped one resumed), then evaluated on the same
@@ -14,7 +17,9 @@ measured for the baseline too. Outputs in ``<out>``:
   per base-frame axis, from the first training seed and the first evaluation episode;
 * ``compare.md`` and ``compare.json``: mean ± std over training seeds (each seed's value is its mean over the
   evaluation episodes) of velocity tracking error, base linear and angular acceleration RMS, stance width,
-  margin and falls, with every run's numbers in the JSON.
+  margin and falls, with every run's numbers in the JSON. A metric an evaluation could not compute (e.g. the
+  acceleration RMS of episodes shorter than ``--warmup-s``) is ``null`` there with its reason in the run's
+  ``"not_computed": {metric: reason}`` and listed under the Markdown table (both only when it happens).
 
 ``--bundle DIR`` then copies the runs' TorchScript actors and configs, and the learned-margin weights they were
 trained with, into a policy bundle with a card (:mod:`margin_rl.train.bundle`); ``--bundled NAME`` trains nothing
@@ -30,28 +35,40 @@ package's current margin weights, ...); the card's table then need not be reprod
 from __future__ import annotations
 
 import argparse
+import os
+import platform
 import sys
-from dataclasses import dataclass
+import time
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from margin_rl.train.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate, save_figure
-from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
-from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, final_model_name, read_json, write_json
-from margin_rl.train.train import (
-    DEFAULT_BACKEND,
-    DEFAULT_ENV,
-    DEFAULT_NUM_ENVS,
-    TrainSpec,
+from margin_rl.provenance import git_commit
+from margin_rl.train.bundle import load_bundle, write_bundle
+from margin_rl.train.cli import (
+    CLI_MARGIN_WEIGHT,
+    DEFAULTS_HELP,
     add_env_arguments,
     env_overrides,
-    make_spec,
-    train,
+    with_training_defaults,
 )
+from margin_rl.train.compat import moved
+from margin_rl.train.environments import DEFAULT_ENV
+from margin_rl.train.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate
+from margin_rl.train.media import plot_accelerations
+from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
+from margin_rl.train.runs import (
+    CONFIG_FILE,
+    PROGRESS_FILE,
+    final_model_name,
+    find_run_config,
+    read_json,
+    versions,
+    write_json,
+)
+from margin_rl.train.train import DEFAULT_BACKEND, DEFAULT_NUM_ENVS, TrainSpec, make_spec, train
 
-COLORS = {"without margin": "tab:blue", "with margin": "tab:red"}  # Fig. 9 of seed 000
+__getattr__ = moved(__name__, {"COLORS": "margin_rl.train.media"})
 
 
 @dataclass(frozen=True)
@@ -139,8 +156,6 @@ def evaluate_variants(
     ``env_options``: the options the runs were trained with (recorded); ``eval_env_overrides``: EnvConfig fields
     changed for the evaluation only (a bundle's own learned-margin weights).
     """
-    from margin_rl.train.runs import find_run_config
-
     out = Path(out)
     report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": dict(env_options or {})}
     if eval_env_overrides:
@@ -166,6 +181,8 @@ def evaluate_variants(
             summary = {k: v["mean"] for k, v in metrics["summary"].items()}
             run_dir = str(config.parent) if in_run else None
             runs.append({"seed": seed, "run_dir": run_dir, "policy": str(policy), "metrics": summary})
+            if metrics.get("not_computed"):  # null in "metrics": say why (present only then)
+                runs[-1]["not_computed"] = metrics["not_computed"]
         table = {key: mean_std([r["metrics"][key] for r in runs]) for key in SUMMARY_METRICS}
         report["variants"][name] = {
             "margin_weight": weight,
@@ -181,40 +198,9 @@ def evaluate_variants(
 
 
 def _settings_json(settings: CompareSettings) -> dict[str, Any]:
-    from dataclasses import asdict
-
     data = asdict(settings)
     data["seeds"] = list(settings.seeds)
     return data
-
-
-def plot_accelerations(examples: dict[str, Evaluation], path: Path, settings: CompareSettings) -> Path:
-    """Fig. 9 style: base linear acceleration per base-frame axis over one evaluation episode, both variants."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-    for name, evaluation in examples.items():
-        traj = evaluation.trajectory
-        after = traj["time"] > settings.warmup_s
-        norm_sq = np.sum(traj["lin_acc"][after] ** 2, axis=1)
-        rms = float(np.sqrt(norm_sq.mean())) if norm_sq.size else float("nan")
-        for k, axis in enumerate("xyz"):
-            label = f"{name} (RMS {rms:.2f} m/s² after {settings.warmup_s:g} s)" if k == 0 else None
-            axes[k].plot(traj["time"], traj["lin_acc"][:, k], color=COLORS.get(name), lw=0.9, label=label)
-            axes[k].set_ylabel(f"base acc. {axis} [m/s²]")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-        ax.axvspan(0.0, settings.warmup_s, color="0.9", zorder=0)  # landing after the reset, not in the table
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[-1].set_xlabel("time [s]")
-    fig.suptitle(
-        f"{settings.env_id}, {settings.backend}: base acceleration, command {settings.forward_velocity:g} m/s "
-        f"(seed {settings.seeds[0]}, evaluation seed {settings.eval_seed})"
-    )
-    return save_figure(fig, path)
 
 
 def write_markdown(report: dict[str, Any], path: Path) -> Path:
@@ -230,6 +216,15 @@ def write_markdown(report: dict[str, Any], path: Path) -> Path:
         "",
     ]
     lines += summary_table(report["variants"])
+    missing = [
+        f"- {key} ({name}, seed {run['seed']}): {reason}"
+        for name, variant in report["variants"].items()
+        for run in variant["runs"]
+        for key, reason in run.get("not_computed", {}).items()
+        if key in SUMMARY_METRICS
+    ]
+    if missing:
+        lines += ["", "Not computed (n/a, or left out of a mean):", *missing]
     lines += ["", f"![base acceleration]({report['plot']})", ""]
     path.write_text("\n".join(lines))
     return path
@@ -242,7 +237,12 @@ def build_parser() -> argparse.ArgumentParser:
     add_env_arguments(parser)
     d = CompareSettings()
     parser.add_argument("--backend", choices=("rsl", "sb3"), default=d.backend)
-    parser.add_argument("--margin-weight", type=float, default=d.margin_weight, help="weight of the margin variant")
+    parser.add_argument(
+        "--margin-weight",
+        type=float,
+        default=CLI_MARGIN_WEIGHT,
+        help=f"weight of the margin variant (default {CLI_MARGIN_WEIGHT:g}); {DEFAULTS_HELP}",
+    )
     parser.add_argument("--seeds", type=int, default=len(d.seeds), help="number of training seeds (0, 1, ...)")
     parser.add_argument("--num-envs", type=int, default=d.num_envs)
     parser.add_argument("--total-steps", type=int, default=d.total_steps, help="environment steps per run")
@@ -298,8 +298,6 @@ def run_bundled(
     ``eval_overrides``: CompareSettings evaluation fields replacing the card's; ``env_overrides``: EnvConfig
     fields for the evaluation (e.g. rough terrain, or other learned-margin weights than the bundle's own).
     """
-    from margin_rl.train.bundle import load_bundle
-
     bundle = load_bundle(name)
     stored = dict(bundle.card["settings"])
     stored["seeds"] = tuple(stored["seeds"])
@@ -312,12 +310,6 @@ def run_bundled(
 
 
 def _provenance(command: list[str], wall_time_s: float) -> dict[str, Any]:
-    import os
-    import platform
-
-    from margin_rl.provenance import git_commit
-    from margin_rl.train.runs import versions
-
     cpuinfo = Path("/proc/cpuinfo")
     lines = cpuinfo.read_text().splitlines() if cpuinfo.is_file() else []
     names = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
@@ -334,8 +326,6 @@ def _provenance(command: list[str], wall_time_s: float) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point."""
-    import time
-
     parser = build_parser()
     args = parser.parse_args(argv)
     command = ["margin-rl-compare", *(sys.argv[1:] if argv is None else argv)]
@@ -350,12 +340,11 @@ def main(argv: list[str] | None = None) -> int:
         else:
             settings = _settings_from_args(args)
             options = env_overrides(args)
-            options.pop("margin_weight", None)
+            options.pop("margin_weight", None)  # each variant sets its own
+            options = with_training_defaults(env_id, options, margin_weight=False)
             out = args.out or Path("runs") / f"compare__{env_id.split('/')[-1]}__{args.backend}"
             report = run_compare(settings, out, options, progress=not args.no_progress)
             if args.bundle is not None:
-                from margin_rl.train.bundle import write_bundle
-
                 write_bundle(report, args.bundle, _provenance(command, time.perf_counter() - t0))
                 print(f"wrote the policy bundle {args.bundle}")
     except (ValueError, TypeError) as exc:

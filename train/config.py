@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import types
 import typing
 from dataclasses import dataclass
 from typing import Any, Union
+
+import torch
 
 BACKENDS: tuple[str, ...] = ("rsl", "sb3")
 """``rsl``: rsl-rl's OnPolicyRunner (PPO); ``sb3``: Stable-Baselines3's PPO."""
@@ -147,10 +150,6 @@ class Sb3PPOConfig:
 
     def ppo_kwargs(self, num_envs: int) -> dict[str, Any]:
         """Keyword arguments of ``stable_baselines3.PPO`` (besides policy, env, seed, device)."""
-        import math
-
-        import torch
-
         rollout = self.n_steps * num_envs
         return {
             "learning_rate": self.learning_rate,

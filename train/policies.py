@@ -17,7 +17,6 @@ raises :class:`PolicyMismatchError` when the observation or action size differs 
 from __future__ import annotations
 
 import copy
-import os
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -25,10 +24,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
+from rsl_rl.utils import resolve_class
+from stable_baselines3 import PPO
+from tensordict import TensorDict
 
-from margin_rl.train.runs import find_run_config, read_json
-
-os.environ.setdefault("GIT_PYTHON_REFRESH", "quiet")
+from margin_rl.train.runs import find_run_config, read_json, torchscript_export
+from margin_rl.train.sb3_backend import warn_unpickling
 
 POLICY_KINDS: tuple[str, ...] = ("sb3", "rsl", "torchscript")
 
@@ -127,10 +129,6 @@ def _run_config(path: Path) -> dict[str, Any] | None:
 
 
 def _load_sb3(path: Path, run_config: dict[str, Any] | None) -> LoadedPolicy:
-    from stable_baselines3 import PPO
-
-    from margin_rl.train.sb3_backend import warn_unpickling
-
     warn_unpickling(path)
     try:
         model = PPO.load(path, device="cpu")
@@ -156,10 +154,6 @@ def _linear_dims(state: dict[str, Any], prefix: str) -> tuple[int | None, int | 
 
 
 def _load_rsl(path: Path, run_config: dict[str, Any] | None) -> LoadedPolicy:
-    import torch
-    from rsl_rl.utils import resolve_class
-    from tensordict import TensorDict
-
     try:
         loaded = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # pickle.UnpicklingError for files that need full unpickling, among others
@@ -191,10 +185,6 @@ def _load_rsl(path: Path, run_config: dict[str, Any] | None) -> LoadedPolicy:
 
 
 def _load_torchscript(path: Path, run_config: dict[str, Any] | None) -> LoadedPolicy:
-    import torch
-
-    from margin_rl.train.runs import torchscript_export
-
     with torchscript_export():
         module = torch.jit.load(str(path), map_location="cpu")
     module.eval()

@@ -1,4 +1,12 @@
-"""PPO through rsl-rl's ``OnPolicyRunner`` (rsl-rl-lib 5.x), with atomic checkpoints, exact resume and stop.
+"""rsl-rl (rsl-rl-lib 5.x): the ``VecEnv`` adapter and PPO through ``OnPolicyRunner``, with atomic checkpoints,
+exact resume and stop.
+
+:class:`RslVecEnv` is an rsl-rl ``VecEnv`` over the batched ANYmal core :class:`margin_rl.envs.core.AnymalCore`
+(``TensorDict`` observation groups ``"policy"`` and, when the environment has privileged observations,
+``"critic"``; ``num_envs``, ``num_actions``, ``max_episode_length``, a writable ``episode_length_buf`` shared with
+the core, ``device``, ``cfg``; ``step`` returns ``(obs, rewards, dones, extras)`` with ``extras["time_outs"]``
+and ``extras["log"]``: the TensorBoard tags of :class:`~margin_rl.train.metrics.EpisodeStatistics`, the same as
+the SB3 backend's). :func:`make_rsl_env` builds one from a registered id. rsl-rl trains the ANYmal ids only.
 
 PPO itself is rsl-rl's. :class:`CheckpointingRunner` only changes where and how checkpoints are written
 (``<run>/checkpoints/ckpt_<steps>.pt`` via a temporary file, with the training config, the progress and the
@@ -21,13 +29,17 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-os.environ.setdefault("GIT_PYTHON_REFRESH", "quiet")
-
+import numpy as np
 import torch
-from rsl_rl.runners import OnPolicyRunner
+from rsl_rl.env import VecEnv
+from rsl_rl.runners import OnPolicyRunner  # needs GIT_PYTHON_REFRESH without git: set in margin_rl.train
+from tensordict import TensorDict
 
 from margin_rl.atomic import atomic_write
-from margin_rl.train.adapters import RslVecEnv
+from margin_rl.envs.core import AnymalCore
+from margin_rl.train.config import to_dict
+from margin_rl.train.environments import ACTION_SIZE, AnymalTarget, EnvTarget, anymal_config, make_core
+from margin_rl.train.metrics import EpisodeStatistics, step_tags, tensorboard_tags
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
     TORCHSCRIPT_FILE,
@@ -38,6 +50,100 @@ from margin_rl.train.runs import (
 )
 
 CHECKPOINT_FORMAT = "margin_rl/rsl-checkpoint-1"
+
+
+class RslVecEnv(VecEnv):
+    """rsl-rl 5.x ``VecEnv`` over an :class:`AnymalCore` (see the module docstring); reset on construction."""
+
+    def __init__(self, core: AnymalCore, device: str | torch.device = "cpu") -> None:
+        self.core = core
+        self.num_envs = core.num_envs
+        self.num_actions = ACTION_SIZE
+        self.max_episode_length = int(core.max_episode_steps)
+        self.device = torch.device(device)
+        self.cfg: dict[str, Any] = to_dict(core.config)
+        self.privileged = bool(core.config.privileged_observations)
+        self.stats = EpisodeStatistics(core.num_envs, core.dt)
+        self.core.reset()
+        self._obs = self._observations(core.observe_all())
+
+    @property
+    def dt(self) -> float:
+        """Policy step [s]."""
+        return self.core.dt
+
+    @property
+    def episode_length_buf(self) -> torch.Tensor:
+        """Steps taken in the current episodes (N,), int64: a view of the core's counter, which decides time-outs."""
+        return torch.from_numpy(self.core.episode_step).to(self.device)
+
+    @episode_length_buf.setter
+    def episode_length_buf(self, value: torch.Tensor) -> None:
+        steps = np.asarray(torch.as_tensor(value).detach().cpu().numpy(), dtype=np.int64).reshape(self.num_envs)
+        self.core.episode_step[:] = steps
+
+    def _observations(self, policy: np.ndarray) -> TensorDict:
+        groups = {"policy": torch.from_numpy(np.ascontiguousarray(policy, dtype=np.float32))}
+        if self.privileged:
+            groups["critic"] = torch.from_numpy(self.core.privileged_observation().astype(np.float32))
+        return TensorDict(groups, batch_size=[self.num_envs]).to(self.device)
+
+    def get_observations(self) -> TensorDict:
+        return self._obs
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict[str, Any]]:
+        out = self.core.step(actions.detach().to("cpu", torch.float64).numpy())
+        obs = {"policy": torch.from_numpy(out.observation)}
+        if self.privileged and out.privileged is not None:
+            obs["critic"] = torch.from_numpy(out.privileged.astype(np.float32))
+        self._obs = TensorDict(obs, batch_size=[self.num_envs]).to(self.device)
+        rewards = torch.as_tensor(out.reward, dtype=torch.float32, device=self.device)
+        dones = torch.as_tensor(out.terminated | out.truncated, device=self.device)
+        finished = self.stats.update(out.reward, out.info, out.terminated, out.truncated)
+        log: dict[str, float | torch.Tensor] = dict(step_tags(out.info))
+        for tag, values in tensorboard_tags(finished).items():
+            finite = values[np.isfinite(values)]
+            if finite.size:
+                log[tag] = torch.as_tensor(finite, dtype=torch.float32)
+        extras = {"time_outs": torch.as_tensor(out.truncated, device=self.device), "log": log}
+        return self._obs, rewards, dones, extras
+
+
+def rsl_vec_env(target: EnvTarget, num_envs: int, seed: int | None, device: str = "cpu") -> RslVecEnv:
+    """The training ``VecEnv`` of an environment target: :class:`RslVecEnv` over the batched core (ANYmal only).
+
+    Raises:
+        ValueError: a generic target (rsl-rl trains the ANYmal ids only; the SB3 backend trains the others).
+    """
+    if not isinstance(target, AnymalTarget):
+        raise ValueError(f"{target.env_id}: the rsl backend trains the batched ANYmal ids only; use --backend sb3")
+    return RslVecEnv(make_core(target.config, num_envs, seed), device)
+
+
+def make_rsl_env(
+    env_id: str, num_envs: int, seed: int | None = None, device: str = "cpu", **env_options: Any
+) -> RslVecEnv:
+    """An rsl-rl ``VecEnv`` of ``num_envs`` environments of a margin_rl ANYmal id, over the batched simulation
+    (reset on construction; observations and rewards as torch tensors on ``device``).
+
+    ``env_options``: any :class:`~margin_rl.envs.config.EnvConfig` field (e.g. ``margin_weight=0.2``,
+    ``alive_bonus=0.1``); ``seed`` seeds the initial states. Example::
+
+        from rsl_rl.runners import OnPolicyRunner
+        from margin_rl.train import make_rsl_env
+        from margin_rl.train.config import RslPPOConfig
+
+        env = make_rsl_env("margin_rl/AnymalB-v0", num_envs=64, seed=0, margin_weight=0.2, alive_bonus=0.1)
+        OnPolicyRunner(env, RslPPOConfig().runner_cfg(False, 50), log_dir=None).learn(100)
+
+    Raises:
+        ValueError: ``env_id`` is not a batched margin_rl ANYmal id (rsl-rl trains only those; train the others
+            with SB3); the learned margin's weights cannot be loaded.
+        TypeError: an option that is not an EnvConfig field, or a badly typed value.
+    """
+    instead = "rsl-rl trains only those here; train other ids with Stable-Baselines3 (margin-rl-train --backend sb3)"
+    config = anymal_config(env_id, env_options, "make_rsl_env", instead)
+    return RslVecEnv(make_core(config, num_envs, seed), device)
 
 
 class TrainingStopped(Exception):  # noqa: N818 - a control-flow signal, not an error

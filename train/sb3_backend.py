@@ -1,11 +1,21 @@
-"""PPO through Stable-Baselines3, with atomic checkpoints, exact resume, stop at a rollout boundary.
+"""Stable-Baselines3: the ``VecEnv`` adapters and PPO training, with atomic checkpoints, exact resume, stop at a
+rollout boundary.
 
-PPO itself is SB3's, on any SB3 ``VecEnv`` that also reports episode metrics
-(:class:`margin_rl.train.adapters.EpisodeMetricsSource`): :class:`~margin_rl.train.adapters.Sb3VecEnv` over the
-ANYmal core, or :class:`~margin_rl.train.adapters.Sb3GymVecEnv` over Gymnasium environments (generic path).
-:class:`TrainingCallback` logs those metrics (for ANYmal the same TensorBoard tags as the rsl-rl backend; for a
-generic environment ``Episode_Metrics/return``, ``/length``, the means of its numeric ``info`` values and
-``Episode_Reward/<term>`` for its ``info["reward_<term>"]``), throughput, drives the progress bar, writes
+Environments (:func:`sb3_vec_env` picks one for an :class:`~margin_rl.train.environments.EnvTarget`):
+
+* :class:`Sb3VecEnv`: a ``VecEnv`` over the batched ANYmal core :class:`margin_rl.envs.core.AnymalCore`
+  (numpy observations, ``dones``, a list of info dicts with ``terminal_observation``, ``TimeLimit.truncated``,
+  ``episode`` = {r, l, t} and ``episode_metrics`` on the step that ends an episode; same-step autoreset, as SB3
+  expects), recording :class:`~margin_rl.train.metrics.EpisodeStatistics`; :func:`make_sb3_env` builds one
+  from a registered id for plain SB3 use;
+* :class:`Sb3GymVecEnv` (:func:`make_gym_vec_env`): SB3's ``DummyVecEnv`` of ``gymnasium.make(id, **env_kwargs)``
+  environments (generic path), each in SB3's ``Monitor`` and seeded ``seed + index`` at the first reset,
+  recording :class:`~margin_rl.train.metrics.InfoEpisodeStatistics`.
+
+Both are episode-metrics sources (:class:`EpisodeMetricsSource`). PPO itself is SB3's; :class:`TrainingCallback`
+logs those metrics (for ANYmal the same TensorBoard tags as the rsl-rl backend; for a generic environment
+``Episode_Metrics/return``, ``/length``, the means of its numeric ``info`` values and ``Episode_Reward/<term>``
+for its ``info["reward_<term>"]``), throughput, drives the progress bar, writes
 ``<run>/checkpoints/ckpt_<steps>.zip`` every ``checkpoint_every`` steps at the start of a rollout (after the
 previous update, a consistent state) and, when a stop is requested, writes one there and ends ``learn`` before
 any new data is collected.
@@ -21,24 +31,42 @@ The TorchScript export is the deterministic actor: the Gaussian mean clipped to 
 from __future__ import annotations
 
 import copy
+import functools
 import io
 import logging
 import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper
 
 from margin_rl.atomic import atomic_write
-from margin_rl.train.adapters import EpisodeMetricsSource
+from margin_rl.envs.core import AnymalCore
 from margin_rl.train.config import Sb3PPOConfig
-from margin_rl.train.metrics import tensorboard_tags
+from margin_rl.train.environments import (
+    ACTION_SIZE,
+    AnymalTarget,
+    EnvTarget,
+    anymal_config,
+    make_core,
+    make_gym_env,
+    observation_size,
+)
+from margin_rl.train.metrics import (
+    EpisodeStatistics,
+    InfoEpisodeStatistics,
+    split_episodes,
+    step_tags,
+    tensorboard_tags,
+)
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
     TORCHSCRIPT_FILE,
@@ -53,6 +81,168 @@ UNPICKLE_WARNING = (
     "{path}: Stable-Baselines3 .zip files are loaded with pickle (which can run arbitrary code); "
     "only load policies from a source you trust"
 )
+
+
+class EpisodeMetricsSource(Protocol):
+    """What :class:`TrainingCallback` reads from the SB3 ``VecEnv`` after each step."""
+
+    num_envs: int
+    stats_finished: dict[str, np.ndarray]  # metrics of the episodes that ended at the last step (arrays, "env")
+
+    def step_summary(self) -> dict[str, float]:
+        """TensorBoard tag -> value of per-step statistics over the batch of the last step."""
+        ...
+
+
+class Sb3VecEnv(VecEnv):
+    """Stable-Baselines3 ``VecEnv`` over an :class:`AnymalCore` (see the module docstring)."""
+
+    def __init__(self, core: AnymalCore) -> None:
+        self.core = core
+        self.render_mode: str | None = None  # read by VecEnv.__init__ through get_attr
+        obs_space = spaces.Box(-np.inf, np.inf, (observation_size(core),), np.float32)
+        act_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
+        self.stats = EpisodeStatistics(core.num_envs, core.dt)
+        self.last_info: dict[str, np.ndarray] = {}
+        self.stats_finished: dict[str, np.ndarray] = {}  # metrics of the episodes that ended at the last step
+        self._actions: np.ndarray | None = None
+        self._t0 = time.time()
+        super().__init__(core.num_envs, obs_space, act_space)
+
+    @property
+    def dt(self) -> float:
+        """Policy step [s]."""
+        return self.core.dt
+
+    def reset(self) -> np.ndarray:
+        """Reset every environment; a seed set with :meth:`seed` reseeds the core's generator first."""
+        seed = self._seeds[0]
+        self._reset_seeds()
+        self._reset_options()
+        self.core.reset(seed=seed)
+        self.stats.reset()
+        self.reset_infos = [{} for _ in range(self.num_envs)]
+        return self.core.observe_all()
+
+    def step_summary(self) -> dict[str, float]:
+        """Per-step statistics of the last step (:func:`margin_rl.train.metrics.step_tags`); empty before it."""
+        return step_tags(self.last_info) if self.last_info else {}
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions)
+
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        if self._actions is None:
+            raise RuntimeError("step_wait() called without step_async()")
+        out = self.core.step(self._actions)
+        self._actions = None
+        self.last_info = out.info
+        done = out.terminated | out.truncated
+        finished = self.stats.update(out.reward, out.info, out.terminated, out.truncated)
+        self.stats_finished = finished
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        elapsed = round(time.time() - self._t0, 6)
+        for episode in split_episodes(finished):
+            i = int(episode.pop("env"))
+            infos[i] = {
+                "terminal_observation": out.final_observation[i],
+                "TimeLimit.truncated": bool(out.truncated[i] and not out.terminated[i]),
+                "episode": {"r": episode["return"], "l": int(episode["length"]), "t": elapsed},
+                "episode_metrics": episode,
+            }
+        return out.observation, out.reward.astype(np.float32), done, infos
+
+    def close(self) -> None:
+        pass
+
+    def _indices(self, indices: int | Sequence[int] | None) -> list[int]:
+        if indices is None:
+            return list(range(self.num_envs))
+        if isinstance(indices, int):
+            return [indices]
+        return list(indices)
+
+    def get_attr(self, attr_name: str, indices: int | Sequence[int] | None = None) -> list[Any]:
+        """An attribute of the adapter (or, failing that, of the core), once per requested environment."""
+        target = self if hasattr(self, attr_name) else self.core
+        return [getattr(target, attr_name) for _ in self._indices(indices)]
+
+    def set_attr(self, attr_name: str, value: Any, indices: int | Sequence[int] | None = None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: int | Sequence[int] | None = None, **method_kwargs: Any
+    ) -> list[Any]:
+        method = getattr(self, method_name)
+        return [method(*method_args, **method_kwargs) for _ in self._indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: int | Sequence[int] | None = None) -> list[bool]:
+        return [False for _ in self._indices(indices)]
+
+
+class Sb3GymVecEnv(VecEnvWrapper):
+    """SB3 ``VecEnv`` wrapper recording :class:`InfoEpisodeStatistics` over ``venv`` (SB3 ``Monitor``-wrapped
+    Gymnasium environments, see :func:`make_gym_vec_env`); steps, observations and infos pass unchanged."""
+
+    def __init__(self, venv: VecEnv) -> None:
+        super().__init__(venv)
+        self.stats = InfoEpisodeStatistics(venv.num_envs)
+        self.stats_finished: dict[str, np.ndarray] = {}
+
+    def reset(self) -> np.ndarray:
+        self.stats.reset()
+        self.stats_finished = {}
+        return self.venv.reset()
+
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        # SB3 marks time-limit ends (truncated and not terminated) in the info of the ending step
+        truncated = np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
+        terminated = np.asarray(dones, dtype=bool) & ~truncated
+        self.stats_finished = self.stats.update(rewards, infos, terminated, truncated)
+        return obs, rewards, dones, infos
+
+    def step_summary(self) -> dict[str, float]:
+        """No per-step statistics: a generic environment's ``info`` has no known layout (episode metrics only)."""
+        return {}
+
+
+def make_gym_vec_env(env_id: str, kwargs: Mapping[str, Any], num_envs: int, seed: int | None) -> Sb3GymVecEnv:
+    """``num_envs`` environments ``gymnasium.make(env_id, **kwargs)`` in SB3's ``DummyVecEnv``, each in a
+    ``Monitor`` (episode returns for SB3's own ``rollout/`` logs), seeded ``seed + index`` at the first reset."""
+    make = functools.partial(make_gym_env, env_id, dict(kwargs))
+    return Sb3GymVecEnv(make_vec_env(make, n_envs=num_envs, seed=seed, vec_env_cls=DummyVecEnv))
+
+
+def sb3_vec_env(target: EnvTarget, num_envs: int, seed: int | None) -> Sb3VecEnv | Sb3GymVecEnv:
+    """The training ``VecEnv`` of an environment target: :class:`Sb3VecEnv` over the batched core for ANYmal,
+    :func:`make_gym_vec_env` for any other id."""
+    if isinstance(target, AnymalTarget):
+        return Sb3VecEnv(make_core(target.config, num_envs, seed))
+    return make_gym_vec_env(target.env_id, target.kwargs, num_envs, seed)
+
+
+def make_sb3_env(env_id: str, num_envs: int, seed: int | None = None, **env_options: Any) -> Sb3VecEnv:
+    """A Stable-Baselines3 ``VecEnv`` of ``num_envs`` environments of a margin_rl ANYmal id, over the native
+    batched simulation (much faster than SB3's ``DummyVecEnv`` of single environments).
+
+    ``env_options``: any :class:`~margin_rl.envs.config.EnvConfig` field (e.g. ``margin_weight=0.2``,
+    ``alive_bonus=0.1``, ``margin="analytic"``); ``seed`` seeds the initial states. Example::
+
+        from stable_baselines3 import PPO
+        from margin_rl.train import make_sb3_env
+
+        env = make_sb3_env("margin_rl/AnymalB-v0", num_envs=64, seed=0, margin_weight=0.2, alive_bonus=0.1)
+        PPO("MlpPolicy", env, n_steps=24).learn(100_000)
+
+    Raises:
+        ValueError: ``env_id`` is not a batched margin_rl ANYmal id (for others, SB3's own ``make_vec_env``);
+            the learned margin's weights cannot be loaded.
+        TypeError: an option that is not an EnvConfig field, or a badly typed value.
+    """
+    instead = f"build it with stable_baselines3.common.env_util.make_vec_env({env_id!r}, n_envs={num_envs})"
+    config = anymal_config(env_id, env_options, "make_sb3_env", instead)
+    return Sb3VecEnv(make_core(config, num_envs, seed))
 
 
 def warn_unpickling(path: str | Path) -> None:
@@ -183,7 +373,7 @@ def train_sb3(
 ) -> tuple[int, bool, Path | None]:
     """Run (or continue) SB3 PPO up to ``total_steps``; returns (env steps, stopped, TorchScript path).
 
-    ``venv`` must also be an :class:`~margin_rl.train.adapters.EpisodeMetricsSource` (read by the callback).
+    ``venv`` must also be an :class:`EpisodeMetricsSource` (read by the callback).
     """
     if checkpoint is not None:
         warn_unpickling(checkpoint)

@@ -2,8 +2,8 @@
 
 Examples::
 
-    python -m margin_rl.train.train --env margin_rl/AnymalB-v0 --backend rsl --margin-weight 1.0 --seed 1 \\
-        --num-envs 128 --total-steps 5000000
+    python -m margin_rl.train.train --env margin_rl/AnymalB-v0 --backend rsl --margin-weight 0.2 --seed 1 \\
+        --num-envs 128 --total-steps 5000000 --env-option alive_bonus=0.1    # the defaults, written out
     python -m margin_rl.train.train --backend sb3 --margin-weight 0 --run-dir runs/baseline
     python -m margin_rl.train.train --resume runs/baseline            # continue a stopped or killed run
     python -m margin_rl.train.train --resume runs/baseline --total-steps 10000000   # ... and extend it
@@ -16,7 +16,11 @@ too), with either backend. Every other registered id takes the generic path (SB3
 there; ``--backend rsl`` is an error): SB3's ``DummyVecEnv`` of ``gymnasium.make(id, **env_kwargs)``, where
 ``--env-option KEY=VALUE`` sets a constructor keyword of the environment (or ``max_episode_steps``) and
 ``--margin-weight`` its ``margin_weight`` keyword when it has one (``margin_rl/SLIPHopper-v0`` does); other
-names are an error listing the keywords it takes. See :mod:`margin_rl.train.adapters`.
+names are an error listing the keywords it takes. See :mod:`margin_rl.train.environments`.
+
+Defaults for the ANYmal ids: the shipped, working experiment of the README and ``bundled/anymal_b/CARD.md``,
+``--margin-weight 0.2`` and ``--env-option alive_bonus=0.1`` unless given (:mod:`margin_rl.train.cli`;
+``make_spec`` and ``EnvConfig`` keep the paper's reward: weight 1, no bonus).
 
 Each run directory (default ``runs/<env>__<backend>__mw<weight>__s<seed>__<time>``, without ``mw<weight>``
 for an environment without a margin weight) holds ``config.json`` (environment: ``env_config`` for ANYmal,
@@ -35,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
 import time
 from dataclasses import dataclass, field
@@ -42,9 +47,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import torch
+from tqdm import tqdm
 
 from margin_rl.envs.config import EnvConfig
-from margin_rl.envs.margin_kinds import MARGIN_KINDS
+from margin_rl.train import cli
+from margin_rl.train.compat import moved
 from margin_rl.train.config import (
     BACKENDS,
     PPOConfig,
@@ -56,6 +64,15 @@ from margin_rl.train.config import (
     parse_assignments,
     to_dict,
 )
+from margin_rl.train.environments import (
+    DEFAULT_ENV,
+    AnymalTarget,
+    EnvTarget,
+    GymTarget,
+    env_target,
+    is_batched_anymal,
+)
+from margin_rl.train.rsl_backend import rsl_vec_env, train_rsl
 from margin_rl.train.runs import (
     CONFIG_FILE,
     PROGRESS_FILE,
@@ -71,8 +88,10 @@ from margin_rl.train.runs import (
     versions,
     write_json,
 )
+from margin_rl.train.sb3_backend import sb3_vec_env, train_sb3
 
-DEFAULT_ENV = "margin_rl/AnymalB-v0"
+__getattr__ = moved(__name__, {"add_env_arguments": "margin_rl.train.cli", "env_overrides": "margin_rl.train.cli"})
+
 DEFAULT_BACKEND = "rsl"  # for ANYmal ids; the generic path has only "sb3"
 GENERIC_BACKEND = "sb3"
 DEFAULT_SEED = 1
@@ -94,7 +113,7 @@ class TrainSpec:
 
     The environment is either a batched ANYmal one, ``env_config`` (``EnvConfig()`` when neither is given), or
     a generic Gymnasium one, ``env_kwargs``: the keyword overrides of ``gymnasium.make(env_id, ...)`` (JSON
-    values, copied; see :func:`margin_rl.train.adapters.env_kwargs_for`). Build specs with :func:`make_spec`,
+    values, copied; see :func:`margin_rl.train.environments.env_kwargs_for`). Build specs with :func:`make_spec`,
     which picks the kind from the id's registration.
     """
 
@@ -133,6 +152,13 @@ class TrainSpec:
         return self.env_kwargs is None
 
     @property
+    def target(self) -> EnvTarget:
+        """The spec's environment: :class:`AnymalTarget` (``env_config``) or :class:`GymTarget` (``env_kwargs``)."""
+        if self.is_anymal:
+            return AnymalTarget(self.env_id, self.env_config)
+        return GymTarget(self.env_id, dict(self.env_kwargs))
+
+    @property
     def steps_per_iteration(self) -> int:
         """Environment steps collected per PPO update."""
         return self.num_envs * self.ppo.steps_per_env
@@ -159,7 +185,7 @@ class TrainSpec:
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict: ``env_config`` for an ANYmal run (as before generic runs existed), else ``env_kwargs``."""
-        env = {"env_config": to_dict(self.env_config)} if self.is_anymal else {"env_kwargs": dict(self.env_kwargs)}
+        env = self.target.to_json()
         return {
             "env_id": self.env_id,
             "backend": self.backend,
@@ -221,8 +247,6 @@ def default_backend(env_id: str) -> str:
     Raises:
         ValueError: the id is not registered.
     """
-    from margin_rl.train.adapters import is_batched_anymal
-
     return DEFAULT_BACKEND if is_batched_anymal(env_id) else GENERIC_BACKEND
 
 
@@ -242,15 +266,10 @@ def make_spec(
         ValueError: unknown id, or a generic id with the rsl backend.
         TypeError: unknown option names or badly typed values.
     """
-    from margin_rl.train.adapters import env_config_for, env_kwargs_for, is_batched_anymal
-
-    overrides = dict(env_overrides or {})
-    if is_batched_anymal(env_id):
-        env = {"env_config": apply_overrides(env_config_for(env_id), overrides)}
-    else:
-        if backend != GENERIC_BACKEND:  # before checking options: the backend is the first thing to fix
-            raise _generic_backend_error(env_id, backend)
-        env = {"env_kwargs": env_kwargs_for(env_id, overrides)}
+    if not is_batched_anymal(env_id) and backend != GENERIC_BACKEND:  # the backend is the first thing to fix
+        raise _generic_backend_error(env_id, backend)
+    target = env_target(env_id, env_overrides)
+    env = {"env_config": target.config} if target.is_anymal else {"env_kwargs": target.kwargs}
     ppo = apply_overrides(default_ppo_config(backend), dict(ppo_overrides or {}))
     return TrainSpec(env_id=env_id, backend=backend, ppo=ppo, **env, **run)
 
@@ -258,23 +277,18 @@ def make_spec(
 def check_environment(spec: TrainSpec) -> None:
     """Fail before a run directory is made when the spec's environment cannot be built as asked.
 
-    ANYmal: the learned margin's weights must load (:func:`~margin_rl.train.adapters.check_margin_available`).
+    ANYmal: the learned margin's weights must load (:func:`~margin_rl.train.environments.check_margin_available`).
     Generic: the id must not be a batched ANYmal one, and one environment must build with ``env_kwargs`` and
-    have spaces the generic path trains (:func:`~margin_rl.train.adapters.check_gym_env`).
+    have spaces the generic path trains (:func:`~margin_rl.train.environments.check_gym_env`).
 
     Raises:
         ValueError: with a hint on what to change.
     """
-    from margin_rl.train.adapters import check_gym_env, check_margin_available, is_batched_anymal
-
     anymal_id = is_batched_anymal(spec.env_id)
     if spec.is_anymal != anymal_id:
         needed = "env_config" if anymal_id else "env_kwargs"
         raise ValueError(f"{spec.env_id} needs a spec with {needed}; build the spec with make_spec")
-    if spec.is_anymal:
-        check_margin_available(spec.env_config)
-    else:
-        check_gym_env(spec.env_id, spec.env_kwargs)
+    spec.target.check()
 
 
 def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) -> Path:
@@ -309,8 +323,6 @@ class _Progress:
     """tqdm progress bar over environment steps (disabled with ``enabled=False``)."""
 
     def __init__(self, total: int, initial: int, enabled: bool, label: str) -> None:
-        from tqdm import tqdm
-
         self.bar = tqdm(
             total=total,
             initial=initial,
@@ -398,27 +410,15 @@ def train(
 
 
 def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks: RunHooks) -> tuple[int, bool, Any]:
-    """Seed, build the environments (the ANYmal core and its adapter, or the generic vector env), and hand over
-    to the backend."""
-    import torch
-
+    """Seed, build the backend's vector environment over the spec's environment, and hand over to the backend."""
     torch.manual_seed(spec.seed)
     np.random.seed(spec.seed % 2**32)
     final = run_dir / final_model_name(spec.backend)
     if isinstance(spec.ppo, RslPPOConfig):
-        from margin_rl.train.adapters import RslVecEnv, make_core
-        from margin_rl.train.rsl_backend import train_rsl
-
-        env = RslVecEnv(make_core(spec.env_config, spec.num_envs, spec.seed))
+        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed)
         cfg = spec.backend_config(run_dir.name)
         return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final)
-    from margin_rl.train.adapters import Sb3VecEnv, make_core, make_gym_vec_env
-    from margin_rl.train.sb3_backend import train_sb3
-
-    if spec.is_anymal:
-        venv = Sb3VecEnv(make_core(spec.env_config, spec.num_envs, spec.seed))
-    else:
-        venv = make_gym_vec_env(spec.env_id, spec.env_kwargs, spec.num_envs, spec.seed)
+    venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed)
     total = spec.total_iterations * spec.steps_per_iteration
     return train_sb3(
         venv, spec.ppo, run_dir, spec.seed, spec.device, total, spec.checkpoint_every, checkpoint, hooks, final
@@ -428,38 +428,14 @@ def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks:
 # ---------------------------------------------------------------------------------------------------------------------
 # command line
 # ---------------------------------------------------------------------------------------------------------------------
-def add_env_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options that shape the environment (shared with compare)."""
-    parser.add_argument("--env", default=None, help=f"registered environment id (default {DEFAULT_ENV})")
-    parser.add_argument("--margin", choices=tuple(MARGIN_KINDS), help="margin used by the env (ANYmal)")
-    parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (ANYmal; default: bundled)")
-    parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (ANYmal; default paper)")
-    parser.add_argument(
-        "--env-option",
-        action="append",
-        metavar="KEY=VALUE",
-        help="ANYmal ids: any EnvConfig field, e.g. command='{\"forward_velocity\": [0.5, 1.0]}'; other ids: a "
-        "constructor keyword of the environment or max_episode_steps, e.g. goal_velocity=0.5. VALUE in JSON "
-        "(repeatable)",
-    )
-
-
-def env_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    """EnvConfig overrides from the shared environment options."""
-    overrides = parse_assignments(args.env_option, "--env-option")
-    for key in ("margin", "margin_weights", "reward_preset"):
-        if getattr(args, key, None) is not None:
-            overrides[key] = getattr(args, key)
-    if getattr(args, "margin_weight", None) is not None:
-        overrides["margin_weight"] = args.margin_weight
-    return overrides
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="margin-rl-train", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+        prog="margin-rl-train",
+        description=__doc__,
+        epilog=f"Defaults: {cli.DEFAULTS_HELP}.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    add_env_arguments(parser)
+    cli.add_env_arguments(parser)
     parser.add_argument(
         "--backend",
         choices=BACKENDS,
@@ -469,7 +445,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--margin-weight",
         type=float,
-        help="weight of the margin reward term (0: baseline); other ids: their margin_weight keyword",
+        help=f"weight of the margin reward term (0: baseline; default {cli.CLI_MARGIN_WEIGHT:g} for ANYmal ids); other "
+        "ids: their margin_weight keyword (default: the environment's)",
     )
     parser.add_argument("--seed", type=int, default=None, help=f"random seed (default {DEFAULT_SEED})")
     parser.add_argument("--num-envs", type=int, default=None, help=f"parallel environments ({DEFAULT_NUM_ENVS})")
@@ -512,24 +489,14 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         "checkpoint_every": args.checkpoint_every or DEFAULT_CHECKPOINT_EVERY,
         "device": args.device or "cpu",
     }
-    spec = make_spec(env_id, backend, env_overrides(args), parse_assignments(args.ppo_option, "--ppo-option"), **run)
-    run_dir = args.run_dir or args.runs_root / run_name(env_id, backend, _margin_weight(spec), spec.seed)
+    overrides = cli.with_training_defaults(env_id, cli.env_overrides(args))
+    spec = make_spec(env_id, backend, overrides, parse_assignments(args.ppo_option, "--ppo-option"), **run)
+    run_dir = args.run_dir or args.runs_root / run_name(env_id, backend, spec.target.margin_weight, spec.seed)
     return spec, run_dir, False
-
-
-def _margin_weight(spec: TrainSpec) -> float | None:
-    """The margin-reward weight of the spec's environment (None for a generic one without such a keyword)."""
-    if spec.is_anymal:
-        return spec.env_config.margin_weight
-    from margin_rl.train.adapters import margin_weight_of
-
-    return margin_weight_of(spec.env_id, spec.env_kwargs)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns 0 when the run finished, 128 + signal number when it was stopped."""
-    import signal
-
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -1,14 +1,18 @@
-"""The SB3 and rsl-rl adapters over AnymalCore, the episode metrics and the config (de)serialisation."""
+"""The SB3 and rsl-rl adapters over AnymalCore and their public factories, the episode metrics, the config
+(de)serialisation, and the deprecated import paths of moved names."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import torch
+from rsl_rl.runners import OnPolicyRunner
+from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecCheckNan
 
+import margin_rl.train
 from margin_rl.envs.config import EnvConfig
-from margin_rl.train.adapters import RslVecEnv, Sb3VecEnv, env_config_for, make_core
+from margin_rl.train import environments, metrics, rsl_backend, sb3_backend
 from margin_rl.train.config import (
     RslPPOConfig,
     Sb3PPOConfig,
@@ -17,7 +21,10 @@ from margin_rl.train.config import (
     parse_assignments,
     to_dict,
 )
+from margin_rl.train.environments import env_config_for, make_core
 from margin_rl.train.metrics import EpisodeStatistics, tensorboard_tags
+from margin_rl.train.rsl_backend import RslVecEnv, make_rsl_env
+from margin_rl.train.sb3_backend import Sb3VecEnv, make_sb3_env
 
 SHORT = {"episode_length_s": 0.1}  # 5 policy steps
 
@@ -130,3 +137,56 @@ def test_config_round_trip_and_overrides() -> None:
         env_config_for("margin_rl/NoSuchRobot-v0")
     with pytest.raises(ValueError, match="not a margin_rl ANYmal environment"):
         env_config_for("CartPole-v1")
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# public factories for plain SB3 and rsl-rl
+# ---------------------------------------------------------------------------------------------------------------------
+def test_plain_sb3_ppo_learns_on_make_sb3_env(toy_weights: str) -> None:
+    assert margin_rl.train.make_sb3_env is make_sb3_env  # re-exported by the package
+    env = make_sb3_env("margin_rl/AnymalB-v0", 4, seed=0, margin_weights=toy_weights, margin_weight=0.2, **SHORT)
+    assert isinstance(env, Sb3VecEnv) and env.num_envs == 4 and env.core.config.margin_weight == 0.2
+    model = PPO("MlpPolicy", env, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu")
+    model.learn(256)
+    assert model.num_timesteps == 256
+
+
+def test_rsl_runner_constructs_on_make_rsl_env(toy_weights: str, tmp_path) -> None:
+    assert margin_rl.train.make_rsl_env is make_rsl_env
+    env = make_rsl_env("margin_rl/AnymalB-v0", 4, seed=0, margin_weights=toy_weights, alive_bonus=0.1, **SHORT)
+    assert isinstance(env, RslVecEnv) and env.device == torch.device("cpu") and env.core.config.alive_bonus == 0.1
+    runner = OnPolicyRunner(env, RslPPOConfig().runner_cfg(False, 50), log_dir=None, device="cpu")
+    assert runner.env is env
+
+
+@pytest.mark.parametrize("factory", [make_sb3_env, make_rsl_env])
+def test_factories_name_what_is_wrong(factory, toy_weights: str) -> None:
+    with pytest.raises(TypeError, match=r"unknown environment option\(s\) \['no_such_option'\].*alive_bonus"):
+        factory("margin_rl/AnymalB-v0", 2, no_such_option=1)
+    with pytest.raises(ValueError, match=r"'margin_rl/SLIPHopper-v0' is not one of them: .*(make_vec_env|sb3)"):
+        factory("margin_rl/SLIPHopper-v0", 2)
+    with pytest.raises(ValueError, match="unknown environment id"):
+        factory("margin_rl/NoSuchRobot-v0", 2)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# deprecated paths
+# ---------------------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("name", "module"),
+    [
+        ("Sb3VecEnv", sb3_backend),
+        ("RslVecEnv", rsl_backend),
+        ("make_gym_vec_env", sb3_backend),
+        ("env_config_for", environments),
+        ("is_batched_anymal", environments),
+        ("InfoEpisodeStatistics", metrics),
+    ],
+)
+def test_adapters_names_still_import_with_a_deprecation(name: str, module) -> None:
+    from margin_rl.train import adapters
+
+    with pytest.warns(DeprecationWarning, match=f"{module.__name__}.{name}"):
+        assert getattr(adapters, name) is getattr(module, name)
+    with pytest.raises(AttributeError):
+        adapters.no_such_name  # noqa: B018

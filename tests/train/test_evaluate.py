@@ -94,3 +94,29 @@ def test_video_without_imageio_gives_a_clear_message(
     )
     assert report["video"] is None
     assert "imageio" in report["video_message"] or "MUJOCO_GL" in report["video_message"]
+
+
+def test_metrics_that_cannot_be_computed_say_why(
+    rsl_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Episodes shorter than the warm-up have no acceleration sample: "not computed" with the reason, never NaN."""
+    out = tmp_path / "short"
+    args = [str(rsl_run / "policy_torchscript.pt"), "--episodes", "2", "--max-steps", "5", "--out", str(out)]
+    assert main(args) == 0  # 5 steps = 0.1 s, within the default 1 s warm-up
+    printed = capsys.readouterr().out
+    assert "nan" not in printed.lower()
+    assert "lin_acc_rms: not computed (episode shorter than the RMS window" in printed
+    report = json.loads((out / "metrics.json").read_text())
+    assert report["summary"]["lin_acc_rms"]["mean"] is None and report["summary"]["lin_acc_rms"]["count"] == 0
+    assert "shorter than the RMS window" in report["not_computed"]["ang_acc_rms"]
+    assert "margin_mean" not in report["not_computed"] and report["summary"]["margin_mean"]["count"] == 2
+
+
+def test_not_computed_reasons() -> None:
+    from margin_rl.train.metrics import not_computed, summarize
+
+    summary = summarize([{"lin_acc_rms": float("nan"), "margin_mean": 0.1, "speed_mean": float("nan")}])
+    reasons = not_computed(summary, warmup_s=1.0)
+    assert set(reasons) == {"lin_acc_rms", "speed_mean"} and "first 1 s" in reasons["lin_acc_rms"]
+    assert reasons["speed_mean"] == "no episode reported a finite value"
+    assert not_computed(summarize([{"lin_acc_rms": 2.0}])) == {}

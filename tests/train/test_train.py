@@ -105,3 +105,34 @@ def test_missing_margin_weights_is_a_clear_error(tmp_path: Path, capsys: pytest.
     with pytest.raises(SystemExit):
         train_module.main(args)
     assert "--margin none" in capsys.readouterr().err and not (tmp_path / "run").exists()
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# command-line defaults: the shipped experiment for the ANYmal ids
+# ---------------------------------------------------------------------------------------------------------------------
+def _spec(*argv: str) -> train_module.TrainSpec:
+    spec, _, _ = train_module.spec_from_args(train_module.build_parser().parse_args(list(argv)))
+    return spec
+
+
+def test_cli_defaults_are_the_shipped_experiment() -> None:
+    config = _spec().env_config  # margin_rl/AnymalB-v0: --margin-weight 0.2 --env-option alive_bonus=0.1
+    assert config.margin_weight == 0.2 and config.alive_bonus == 0.1
+    config = _spec("--env", "margin_rl/AnymalC-v0", "--margin-weight", "0", "--env-option", "alive_bonus=0").env_config
+    assert config.margin_weight == 0.0 and config.alive_bonus == 0.0  # given values win
+    assert _spec("--env-option", "margin_weight=0.7").env_config.margin_weight == 0.7
+    # other ids keep their own defaults; the Python API keeps EnvConfig's
+    assert _spec("--env", "margin_rl/SLIPHopper-v0").env_kwargs == {}
+    assert train_module.make_spec().env_config.margin_weight == 1.0
+    helptext = train_module.build_parser().format_help()
+    assert "--margin-weight 0.2" in helptext and "alive_bonus=0.1" in helptext
+
+
+def test_compare_cli_defaults_are_the_shipped_experiment() -> None:
+    from margin_rl.train.cli import with_training_defaults
+    from margin_rl.train.compare import build_parser
+
+    assert build_parser().parse_args([]).margin_weight == 0.2
+    assert "alive_bonus=0.1" in build_parser().format_help()
+    options = with_training_defaults("margin_rl/AnymalB-v0", {"margin": "none"}, margin_weight=False)
+    assert options == {"alive_bonus": 0.1, "margin": "none"}  # the variants set their own margin weights

@@ -1,0 +1,72 @@
+"""Command-line options and defaults shared by ``train``, ``evaluate`` and ``compare``.
+
+:func:`add_env_arguments` adds the options that shape the environment, :func:`env_overrides` turns them into
+option overrides (EnvConfig fields for the ANYmal ids, constructor keywords for the others).
+
+Training defaults of the command line (``train`` and ``compare``, ANYmal ids only): the shipped, working
+experiment of the README and ``bundled/anymal_b/CARD.md``, margin weight :data:`CLI_MARGIN_WEIGHT` and
+``alive_bonus`` :data:`CLI_ALIVE_BONUS` (:func:`with_training_defaults`). ``EnvConfig``'s own defaults (the
+paper's reward: weight 1, no bonus) stay what the Python API and the environments use: with them, a trot's
+negative learned margin makes every step's reward negative and PPO learns to fall.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Mapping
+from typing import Any
+
+from margin_rl.envs.margin_kinds import MARGIN_KINDS
+from margin_rl.train.config import parse_assignments
+from margin_rl.train.environments import DEFAULT_ENV, is_batched_anymal
+
+CLI_MARGIN_WEIGHT = 0.2
+"""Margin-reward weight of ``train`` (and of ``compare``'s margin variant) unless ``--margin-weight`` is given."""
+CLI_ALIVE_BONUS = 0.1
+"""``alive_bonus`` of ``train`` and ``compare`` unless ``--env-option alive_bonus=...`` is given."""
+DEFAULTS_HELP = (
+    f"ANYmal ids default to the shipped experiment: --margin-weight {CLI_MARGIN_WEIGHT:g} and "
+    f"--env-option alive_bonus={CLI_ALIVE_BONUS:g} (EnvConfig's own defaults, weight 1 and no bonus, "
+    "make PPO learn to fall)"
+)
+
+
+def add_env_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options that shape the environment (``train``, ``evaluate``, ``compare``)."""
+    parser.add_argument("--env", default=None, help=f"registered environment id (default {DEFAULT_ENV})")
+    parser.add_argument("--margin", choices=tuple(MARGIN_KINDS), help="margin used by the env (ANYmal)")
+    parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (ANYmal; default: bundled)")
+    parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (ANYmal; default paper)")
+    parser.add_argument(
+        "--env-option",
+        action="append",
+        metavar="KEY=VALUE",
+        help="ANYmal ids: any EnvConfig field, e.g. command='{\"forward_velocity\": [0.5, 1.0]}'; other ids: a "
+        "constructor keyword of the environment or max_episode_steps, e.g. goal_velocity=0.5. VALUE in JSON "
+        "(repeatable)",
+    )
+
+
+def env_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """Environment option overrides from the shared environment options (and ``--margin-weight``, if any)."""
+    overrides = parse_assignments(args.env_option, "--env-option")
+    for key in ("margin", "margin_weights", "reward_preset"):
+        if getattr(args, key, None) is not None:
+            overrides[key] = getattr(args, key)
+    if getattr(args, "margin_weight", None) is not None:
+        overrides["margin_weight"] = args.margin_weight
+    return overrides
+
+
+def with_training_defaults(env_id: str, overrides: Mapping[str, Any], margin_weight: bool = True) -> dict[str, Any]:
+    """``overrides`` with the command line's training defaults filled in for an ANYmal id (unchanged for others):
+    ``alive_bonus`` :data:`CLI_ALIVE_BONUS` and, with ``margin_weight``, ``margin_weight``
+    :data:`CLI_MARGIN_WEIGHT`, unless given.
+
+    Raises:
+        ValueError: the id is not registered.
+    """
+    if not is_batched_anymal(env_id):
+        return dict(overrides)
+    defaults = {"margin_weight": CLI_MARGIN_WEIGHT} if margin_weight else {}
+    return {**defaults, "alive_bonus": CLI_ALIVE_BONUS, **overrides}

@@ -27,8 +27,10 @@ usual locomotion regularisers (torques, action rate, orientation, feet air time,
   ``observation_structure``): base linear and angular velocity (base frame), projected gravity, command,
   joint positions relative to standing, joint velocities, previous action. Its bounds are ±inf: velocities
   have no physical bound short of the divergence check, and Gymnasium's MuJoCo robots do the same.
-* Episode: 20 s (TimeLimit, 1000 steps); terminated on base or thigh contact with the terrain, base
-  height below 0.25 m above the terrain, tilt above 1 rad, or a diverged simulation
+* Episode: ``EnvConfig.episode_length_s`` (20 s = 1000 steps by default), truncated by the environment
+  itself (the ids carry no TimeLimit, so ``gymnasium.make(id, episode_length_s=10)`` gives 500-step
+  episodes; ``max_episode_steps=`` adds a TimeLimit as usual); terminated on base or thigh contact with the
+  terrain, base height below 0.25 m above the terrain, tilt above 1 rad, or a diverged simulation
   (``info["diverged"]``). A non-finite reward or observation is never returned: it raises FloatingPointError.
 * ``info``: every weighted reward term as ``reward_<term>`` (their sum is the reward), ``margin``,
   ``base_lin_acc`` and ``base_ang_acc`` (base frame; finite differences over the policy step),
@@ -252,7 +254,9 @@ class AnymalEnv(gymnasium.Env):
         check_frame_size(width, height)
         if render_mode == "human":
             require_display()
-        self.core = AnymalCore(self.config, num_envs=1, autoreset=False, truncate=False)
+        # The env truncates its own episodes at EnvConfig.episode_length_s (the ids carry no TimeLimit), so a
+        # shorter or longer episode_length_s given to gymnasium.make is the length the agent sees.
+        self.core = AnymalCore(self.config, num_envs=1, autoreset=False, truncate=True)
         self.metadata = {**self.metadata, "render_modes": available_render_modes(), "render_fps": round(1.0 / self.dt)}
         self.observation_space = spaces.Box(-np.inf, np.inf, (observation_size(),), np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
@@ -290,7 +294,7 @@ class AnymalEnv(gymnasium.Env):
         check_finite_outputs(out.observation[0], out.reward[0], self.config)
         if self.render_mode == "human":
             self.render()
-        return out.observation[0], float(out.reward[0]), bool(out.terminated[0]), False, info
+        return out.observation[0], float(out.reward[0]), bool(out.terminated[0]), bool(out.truncated[0]), info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

@@ -15,7 +15,10 @@ from __future__ import annotations
 import gymnasium
 
 EPISODE_STEPS = 1000
-"""20 s at the 50 Hz policy rate (EnvConfig.episode_length_s / (MJCF timestep x decimation); tested)."""
+"""Default episode length: 20 s at the 50 Hz policy rate (EnvConfig.episode_length_s / (MJCF timestep x
+decimation); tested). The ANYmal ids register no ``max_episode_steps``: the environments truncate their
+episodes at their config's ``episode_length_s`` themselves, so a changed length is never overridden by a
+registered TimeLimit."""
 
 ANYMAL_ENV_IDS: dict[str, dict[str, str]] = {
     "margin_rl/AnymalB-v0": {"robot": "anymal_b", "terrain": "flat"},
@@ -39,7 +42,6 @@ def register_envs() -> None:
             id=env_id,
             entry_point="margin_rl.envs.anymal:AnymalEnv",
             vector_entry_point="margin_rl.envs.vector:AnymalVectorEnv",
-            max_episode_steps=EPISODE_STEPS,
             kwargs=dict(kwargs),
         )
 

@@ -35,7 +35,7 @@ def toy_weights(tmp_path_factory: pytest.TempPathFactory) -> str:
 def test_check_env_on_every_id(env_id: str, toy_weights: str) -> None:
     env = gym.make(env_id, margin_weights=toy_weights)
     check_env(env.unwrapped, skip_render_check=True)
-    assert env.spec.max_episode_steps == EPISODE_STEPS == env.unwrapped.core.max_episode_steps
+    assert env.unwrapped.core.max_episode_steps == EPISODE_STEPS  # the env truncates itself (no TimeLimit)
     assert sum(env.unwrapped.observation_structure.values()) == env.observation_space.shape[0]
     env.close()
 
@@ -286,3 +286,21 @@ def test_diverged_state_does_not_crash_the_analytic_margin_mode() -> None:
     env.unwrapped.core._qvel[0, :] = np.nan
     _, reward, terminated, _, info = env.step(np.zeros(12))
     assert terminated and info["diverged"] == 1.0 and np.isfinite(reward)
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_episode_length_option_is_the_episode_the_agent_sees(vector: bool, toy_weights: str) -> None:
+    """A changed episode_length_s is not overridden by a registered TimeLimit (there is none)."""
+    options = {"margin_weights": toy_weights, "episode_length_s": 0.2, "randomization": NO_NOISE}  # 10 steps
+    if vector:
+        env = gym.make_vec("margin_rl/AnymalB-v0", num_envs=2, **options)
+        actions = np.zeros((2, 12))
+    else:
+        env = gym.make("margin_rl/AnymalB-v0", **options)
+        actions = np.zeros(12)
+    env.reset(seed=0)
+    for step in range(1, 11):
+        _, _, terminated, truncated, _ = env.step(actions)
+        assert not np.any(terminated)
+        assert np.all(truncated) == (step == 10) and np.any(truncated) == (step == 10)
+    env.close()

@@ -34,7 +34,10 @@ usual locomotion regularisers (torques, action rate, orientation, feet air time,
   (``info["diverged"]``). A non-finite reward or observation is never returned: it raises FloatingPointError.
 * ``info``: every weighted reward term as ``reward_<term>`` (their sum is the reward), ``margin``,
   ``base_lin_acc`` and ``base_ang_acc`` (base frame; finite differences over the policy step),
-  ``base_lin_vel``, ``velocity_error``, ``contacts``, ``stance_width``, ``fell``, ``diverged``.
+  ``base_lin_vel``, ``velocity_error``, ``contacts``, ``stance_width``, ``fell``, ``diverged``, and
+  ``lambda``: the (47,) stability state the margin was evaluated on (seed 000 eq. 4; layout
+  :data:`margin_rl.stability.LAMBDA_FIELDS`, one name per entry from :func:`margin_rl.stability.lambda_names`,
+  decoded by :func:`margin_rl.stability.from_lambda`), so it can be logged, labelled or fed to another margin.
 * Options: ``config=EnvConfig(...)`` or any EnvConfig field as a keyword (``margin_weight``,
   ``reward_preset``, ``randomization=RandomizationConfig(friction=(0.4, 1.0), push_interval_s=5.0,
   observation_noise=1.0, ...)``, ``command=CommandConfig(forward_velocity=(0.25, 1.0))``), each checked

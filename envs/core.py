@@ -419,6 +419,7 @@ class AnymalCore:
             "velocity_error": np.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
             "contacts": state.contacts.astype(np.float64),
             "stance_width": stance_width(stability.feet),  # feet in H, as they entered lambda
+            "lambda": self._last_lambda,  # (N, 47), the margin's input (names: stability.lambda_names())
             "fell": (terminated & ~diverged).astype(np.float64),
             "diverged": diverged.astype(np.float64),
         }

@@ -304,3 +304,33 @@ def test_episode_length_option_is_the_episode_the_agent_sees(vector: bool, toy_w
         assert not np.any(terminated)
         assert np.all(truncated) == (step == 10) and np.any(truncated) == (step == 10)
     env.close()
+
+
+@pytest.mark.parametrize("vector", [False, True])
+def test_info_lambda_is_the_state_the_margin_saw(vector: bool, toy_weights: str) -> None:
+    """info["lambda"] is the core's lambda; decoded, it gives the info's contacts and stance width back."""
+    from margin_rl.stability import LAMBDA_DIM, lambda_names
+    from margin_rl.stability.learned import LearnedMargin
+
+    options = {"margin_weights": toy_weights, "randomization": RandomizationConfig(push_interval_s=0.1)}
+    env = (
+        gym.make_vec("margin_rl/AnymalB-v0", num_envs=3, **options)
+        if vector
+        else gym.make("margin_rl/AnymalB-v0", **options)
+    )
+    env.reset(seed=1)
+    rng = np.random.default_rng(0)
+    model = LearnedMargin.load(toy_weights)
+    for _ in range(20):
+        _, _, _, _, info = env.step(rng.uniform(-0.5, 0.5, size=env.action_space.shape))
+        lam = np.atleast_2d(info["lambda"])
+        assert lam.shape == (3 if vector else 1, LAMBDA_DIM) == (lam.shape[0], len(lambda_names()))
+        np.testing.assert_array_equal(lam, env.unwrapped.core.last_lambda)
+        state = from_lambda(lam)
+        np.testing.assert_array_equal(state.contacts, np.atleast_2d(info["contacts"]))
+        feet = state.feet
+        width = 0.5 * (np.abs(feet[:, 0, 1] - feet[:, 1, 1]) + np.abs(feet[:, 2, 1] - feet[:, 3, 1]))
+        np.testing.assert_allclose(width, np.atleast_1d(info["stance_width"]), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.clip(model(lam), -0.5, 0.5), np.atleast_1d(info["margin"]), atol=1e-12)
+        np.testing.assert_array_equal(state.to_lambda(), lam)  # to_lambda(from_lambda(lam)) == lam
+    env.close()

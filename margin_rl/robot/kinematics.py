@@ -360,7 +360,7 @@ class RobotKinematics:
         if p.shape[-2:] != (len(self.legs), 3):
             raise ValueError(f"feet_rel_com must have shape (..., {len(self.legs)}, 3), got {p.shape}")
         single = p.ndim == 2
-        newton, sensitivity, offset = self._com_fixed_point_newton
+        newton, sensitivity, offset = self.com_fixed_point_linearisation
         # First-order initial guess: CoM linear in the feet positions about the standing pose,
         # c0 = (I - sum_i G_i)^-1 (c_s + sum_i G_i (p_i - f_i,s)), so the first residual is second order.
         com = (offset + np.einsum("fij,...fj->...i", sensitivity, p)) @ newton.T
@@ -380,7 +380,7 @@ class RobotKinematics:
         return self.inverse_kinematics(p + com[..., None, :]), com
 
     @functools.cached_property
-    def _com_fixed_point_newton(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def com_fixed_point_linearisation(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Linearisation of the CoM in the feet positions at the standing pose (central differences).
 
         Returns ``((I - G)^-1, G_i, c_s - sum_i G_i f_i,s)`` with G_i = dCoM/d(foot i) (3 x 3 each),

@@ -42,12 +42,20 @@ import multiprocessing
 import os
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from margin_rl.robot import Robot, load_robot
-from margin_rl.stability.contact import DEFAULT_CONTACT_TORQUE_LIMIT, CentroidalLoad, ContactSet, LegLimits
+from margin_rl.stability.contact import (
+    DEFAULT_CONTACT_TORQUE_LIMIT,
+    CentroidalLoad,
+    ContactSet,
+    LegLimits,
+    parse_friction,
+    positive_scalar,
+)
+from margin_rl.stability.contact_batch import ContactBatch, contact_batch
 from margin_rl.stability.icp import stability_margin
 from margin_rl.stability.lambda_state import (
     LAMBDA_DIM,
@@ -55,11 +63,22 @@ from margin_rl.stability.lambda_state import (
     check_lambda,
     from_lambda,
 )
-from margin_rl.stability.projection import DEFAULT_FOCUS_TOL, DEFAULT_MAX_LPS, DEFAULT_TOL
-from margin_rl.stability.region import FeasibleRegion, RegionSettings, solve_region
+from margin_rl.stability.polygon import convex_polygon, halfspaces_from_polygon
+from margin_rl.stability.projection import (
+    DEFAULT_FOCUS_TOL,
+    DEFAULT_MAX_LPS,
+    DEFAULT_TOL,
+    iterative_projection,
+)
+from margin_rl.stability.region import UNBOUNDED_TOL, FeasibleRegion, RegionSettings, solve_region
+from margin_rl.stability.region_batch import ProgramStructure, ReusedRegionSolver, program_values
+from margin_rl.stability.sampling import standing_state
 
 STATUSES: tuple[str, ...] = ("ok", "unreachable", "infeasible", "no_contact", "solver_error")
 """Status names; batch results store their index in this tuple (``STATUSES.index("ok") == 0``)."""
+
+LABELLING_PATHS: tuple[str, ...] = ("batched", "per_state")
+"""Values of :attr:`AnalyticSettings.labelling`: how :func:`analytic_margin_batch` labels many states."""
 
 
 @dataclass(frozen=True)
@@ -80,9 +99,16 @@ class AnalyticSettings:
             raise ValueError(f"outside must be 'euclidean' or 'lines', got {self.outside!r}")
         if self.focus_tol is not None and self.outside != "euclidean":
             raise ValueError("focus_tol needs outside='euclidean' (eq. 7 outside has no distance bracket)")
+        if self.labelling not in LABELLING_PATHS:
+            raise ValueError(f"labelling must be one of {LABELLING_PATHS}, got {self.labelling!r}")
 
     com_iterations: int = 10  # fixed-point iterations for the CoM offset
     com_tol: float = 3e-5  # [m], residual of the CoM fixed point (joint-angle error ~3e-5 rad)
+    # How analytic_margin_batch (and so the dataset) labels many states: "batched" (contact problems
+    # over the batch, one solver per program structure: learned margin v2, item 6) or "per_state"
+    # (analytic_margin on each state, the path before it). Same margins to within focus_tol; the
+    # single-state analytic_margin is the same either way.
+    labelling: str = "batched"
 
     @classmethod
     def from_dict(cls, values: dict[str, object]) -> AnalyticSettings:
@@ -96,7 +122,9 @@ class AnalyticSettings:
         if unknown:
             raise ValueError(f"unknown analytic settings {unknown}; known: {sorted(known)}")
         friction = values.get("friction", "cone")
-        return cls(**{**values, "friction": tuple(friction) if isinstance(friction, list) else friction})  # type: ignore[arg-type]
+        # Settings recorded before the batched path existed do not name a path: theirs was per state.
+        friction = tuple(friction) if isinstance(friction, list) else friction
+        return cls(**{**values, "friction": friction, "labelling": values.get("labelling", "per_state")})  # type: ignore[arg-type]
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -108,6 +136,7 @@ class AnalyticSettings:
             "focus_tol": self.focus_tol,
             "com_iterations": self.com_iterations,
             "com_tol": self.com_tol,
+            "labelling": self.labelling,
         }
 
 
@@ -350,6 +379,10 @@ def worker_robot(name: str) -> Robot:
 def _evaluate_chunk(args: tuple[str, np.ndarray, AnalyticSettings]) -> tuple[np.ndarray, ...]:
     name, lams, settings = args
     robot = worker_robot(name)
+    # The batched path needs the focused projection (the labels' default): its margin is the bracket's
+    # inner end, and it builds no FeasibleRegion. Other settings are labelled state by state.
+    if settings.labelling == "batched" and settings.focus_tol is not None:
+        return _label_batched(robot, lams, settings)
     n = len(lams)
     margin, status = np.full(n, np.nan), np.zeros(n, dtype=np.int8)
     n_lps, seconds = np.zeros(n, dtype=np.int16), np.zeros(n)
@@ -357,6 +390,102 @@ def _evaluate_chunk(args: tuple[str, np.ndarray, AnalyticSettings]) -> tuple[np.
         r = analytic_margin(robot, lam, settings)
         margin[i], status[i] = r.margin, STATUSES.index(r.status)
         n_lps[i], seconds[i] = r.n_lps, r.timings["total"]
+    return margin, status, n_lps, seconds
+
+
+def _stance_programs(
+    batch: ContactBatch, states: np.ndarray, structure: ProgramStructure, w_max: float, extent: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The region programs' data (:func:`program_values`) of ``states`` of ``batch``, each with
+    ``structure.n_stance`` stance feet (taken in leg order)."""
+    feet = np.nonzero(batch.stance[states])[1].reshape(len(states), structure.n_stance)
+    rows = states[:, None]
+    limits = batch.torque_limits[feet]
+    return program_values(
+        structure,
+        batch.contact_points[rows, feet],
+        batch.normals[rows, feet],
+        batch.mu[states],
+        batch.jacobians[rows, feet],
+        -limits,
+        limits,
+        batch.leg_bias[rows, feet],
+        batch.wrench[states, :3],
+        batch.wrench[states, 3:],
+        w_max,
+        extent,
+    )
+
+
+def _label_batched(robot: Robot, lams: np.ndarray, s: AnalyticSettings) -> tuple[np.ndarray, ...]:
+    """``(margin, status, n_lps, seconds)`` of many states by the batched path (``labelling="batched"``).
+
+    The same steps as :func:`analytic_margin` with ``s.focus_tol`` set: the contact problems of the
+    whole batch at once (:func:`~margin_rl.stability.contact_batch.contact_batch`), then, per number of
+    stance feet, the programs' data of all those states at once and one re-used solver
+    (:mod:`~margin_rl.stability.region_batch`), the focused projection of each state, and its margin
+    from the region's vertices as in step 5 (the bare vertices and half-spaces: no FeasibleRegion is
+    returned). A region reaching the clipping box is a solver error, as an "unbounded" one is. ``seconds``
+    spreads the shared work evenly over the states.
+    """
+    assert s.focus_tol is not None  # callers dispatch unfocused settings to the per-state path
+    t_start = time.perf_counter()
+    n_states = len(lams)
+    batch = contact_batch(robot, lams, s.com_iterations, s.com_tol)
+    margin, status = np.full(n_states, np.nan), np.zeros(n_states, dtype=np.int8)
+    n_lps, seconds = np.zeros(n_states, dtype=np.int16), np.zeros(n_states)
+    status[batch.below_feet] = STATUSES.index("infeasible")
+    status[batch.unreachable] = STATUSES.index("unreachable")
+    status[batch.no_contact] = STATUSES.index("no_contact")
+    # Validated once for the batch (solve_region checks them on every call).
+    n_faces = parse_friction(s.friction)
+    tol = positive_scalar("tol", s.tol)
+    focus_tol = positive_scalar("focus_tol", s.focus_tol)
+    w_max = positive_scalar("contact_torque_limit", s.contact_torque_limit, allow_zero=True)
+    if isinstance(s.max_lps, bool) or not isinstance(s.max_lps, (int, np.integer)) or s.max_lps < 4:
+        raise ValueError(f"max_lps must be an integer >= 4, got {s.max_lps!r}")
+    extent = RegionSettings().extent
+    box = extent - UNBOUNDED_TOL
+    solvable = batch.solvable
+    n_stance = batch.stance.sum(axis=1)
+    limits = batch.torque_limits
+    seconds += (time.perf_counter() - t_start) / max(n_states, 1)
+
+    # The solvers' set-up (equilibration) comes from the standing state, the same for every batch.
+    reference = contact_batch(robot, standing_state(robot)[None], s.com_iterations, s.com_tol)
+    for n in np.unique(n_stance[solvable]).tolist():
+        t_group = time.perf_counter()
+        states = np.flatnonzero(solvable & (n_stance == n))
+        structure = ProgramStructure.of(n, limits.shape[1], n_faces)
+        values, b = _stance_programs(batch, states, structure, w_max, extent)
+        # The standing state's first n feet: a program of this structure with typical magnitudes.
+        stance_n = np.arange(len(robot.legs)) < n
+        ref_values, ref_b = _stance_programs(
+            replace(reference, stance=stance_n[None]), np.zeros(1, dtype=int), structure, w_max, extent
+        )
+        oracle = ReusedRegionSolver(structure, ref_values[0], ref_b[0])
+        seconds[states] += (time.perf_counter() - t_group) / len(states)
+        for j, i in enumerate(states.tolist()):
+            t_state = time.perf_counter()
+            oracle.load(values[j], b[j])
+            fx, fy = batch.capture_point[i].tolist()
+            proj = iterative_projection(oracle, tol, int(s.max_lps), focus=(fx, fy), focus_tol=focus_tol)
+            n_lps[i] = oracle.n_solves
+            if proj.status == "empty":
+                status[i] = STATUSES.index("infeasible")
+            elif proj.status == "solver_error":
+                status[i] = STATUSES.index("solver_error")
+            else:
+                # The region's vertices and eq. 7 / the Euclidean distance, as solve_region and step 5.
+                vertices = np.asarray(convex_polygon([(x, y) for x, y in proj.points.tolist()])).reshape(-1, 2)
+                if (np.abs(vertices) >= box).any():  # an "unbounded" region
+                    status[i] = STATUSES.index("solver_error")
+                else:
+                    region = FeasibleRegion(
+                        vertices, halfspaces_from_polygon(vertices), "ok", True, proj.n_evals, 0.0, math.nan, proj.gap
+                    )
+                    margin[i] = stability_margin(region, (fx, fy), outside="euclidean")
+            seconds[i] += time.perf_counter() - t_state
     return margin, status, n_lps, seconds
 
 

@@ -229,24 +229,25 @@ def torque_bounds(torque_limits: Any, n: int, k: int, idx: NDArray[np.intp]) -> 
 
 
 def tangent_bases(normals: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Orthonormal tangents t1, t2, each (n, 3), with (t1, t2, n) right-handed.
+    """Orthonormal tangents t1, t2, each (..., n, 3) like the unit ``normals``, with (t1, t2, n) right-handed.
 
     t1 is the projection of the x axis on the tangent plane (of y when the normal is nearly
     along x), so for flat ground t1 = x, t2 = y and a mirror y -> -y maps the basis to itself up
-    to the sign of t2 (which leaves the pyramid's set of face directions unchanged).
+    to the sign of t2 (which leaves the pyramid's set of face directions unchanged). Leading axes
+    (a batch of states) are element-wise: each row's result does not depend on the others.
     """
-    nx, ny, nz = normals[:, 0], normals[:, 1], normals[:, 2]
+    nx, ny, nz = normals[..., 0], normals[..., 1], normals[..., 2]
     use_x = np.abs(nx) < 0.9
     # t1 = ref - n (n . ref) with ref = x (or y), normalised.
     dot = np.where(use_x, nx, ny)
-    t1 = -normals * dot[:, None]
-    t1[:, 0] += use_x
-    t1[:, 1] += ~use_x
-    t1 /= np.sqrt(np.einsum("ij,ij->i", t1, t1))[:, None]
+    t1 = -normals * dot[..., None]
+    t1[..., 0] += use_x
+    t1[..., 1] += ~use_x
+    t1 /= np.sqrt(np.einsum("...j,...j->...", t1, t1))[..., None]
     # t2 = n x t1, written out (np.cross has a large fixed overhead on tiny arrays).
-    ax, ay, az = t1[:, 0], t1[:, 1], t1[:, 2]
+    ax, ay, az = t1[..., 0], t1[..., 1], t1[..., 2]
     t2 = np.empty_like(t1)
-    t2[:, 0], t2[:, 1], t2[:, 2] = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax
+    t2[..., 0], t2[..., 1], t2[..., 2] = ny * az - nz * ay, nz * ax - nx * az, nx * ay - ny * ax
     return t1, t2
 
 

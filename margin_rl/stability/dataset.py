@@ -8,7 +8,8 @@ Command line::
 
 Layout of a dataset directory::
 
-    manifest.json        robot, sampler version, seed, package version, analytic settings, shard size
+    manifest.json        robot, sampler version, seed, package version, analytic settings (with the
+                         labelling path that made the labels: "batched" or "per_state"), shard size
     shard_00000.npz      lam (k, 47) float32, margin (k,) float32 [m] (NaN unless ok),
                          status (k,) int8 (index into STATUSES), n_lps (k,) int16, seconds (k,) float32
 
@@ -36,7 +37,13 @@ from tqdm import tqdm
 
 from margin_rl.atomic import atomic_savez, atomic_write_text
 from margin_rl.robot import available_robots
-from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch, worker_robot
+from margin_rl.stability.analytic import (
+    LABELLING_PATHS,
+    STATUSES,
+    AnalyticSettings,
+    analytic_margin_batch,
+    worker_robot,
+)
 from margin_rl.stability.lambda_state import LAMBDA_DIM
 from margin_rl.stability.sampling import SAMPLER_VERSION, sample_states
 
@@ -72,7 +79,7 @@ class DatasetSpec:
         return (
             f"python -m margin_rl.stability.dataset generate --robot {self.robot} --n {self.n} "
             f"--out {shlex.quote(str(out))} --seed {self.seed} --shard-size {self.shard_size} "
-            f"--friction {friction_arg} --focus-tol {self.settings.focus_tol}"
+            f"--friction {friction_arg} --focus-tol {self.settings.focus_tol} --labelling {self.settings.labelling}"
         )
 
     def identity(self) -> dict[str, object]:
@@ -125,10 +132,17 @@ def _prepare(spec: DatasetSpec, out: Path, command: str) -> list[int]:
     identity = spec.identity()
     if manifest_path.is_file():
         old = json.loads(manifest_path.read_text())
+        if isinstance(old.get("analytic_settings"), dict):
+            # Manifests written before the labelling path was recorded name none: theirs was per state.
+            old["analytic_settings"] = AnalyticSettings.from_dict(old["analytic_settings"]).as_dict()
         mismatched = [k for k, v in identity.items() if old.get(k) != v]
         if mismatched:
             details = "; ".join(f"{k}: {old.get(k)!r} there, {identity[k]!r} asked" for k in mismatched)
-            raise DatasetError(f"{out} holds a dataset with other settings ({details}); use another --out")
+            hint = ""
+            old_path = (old.get("analytic_settings") or {}).get("labelling")
+            if mismatched == ["analytic_settings"] and old_path != spec.settings.labelling:
+                hint = f" (to resume it with the path that labelled it, pass --labelling {old_path})"
+            raise DatasetError(f"{out} holds a dataset with other settings ({details}){hint}; use another --out")
         if spec.n < old.get("n", 0):
             # A smaller n would rewrite its last shard shorter and orphan the rest.
             raise DatasetError(f"{out} already holds n={old['n']} samples; ask for at least that many to resume")
@@ -301,6 +315,12 @@ def main(argv: list[str] | None = None) -> int:
     gen.add_argument("--ray", default=None, metavar="ADDRESS", help="run on Ray: 'auto', 'local' or an address")
     gen.add_argument("--friction", type=_parse_friction, default="cone", help="'cone' or 'pyramid:K'")
     gen.add_argument("--focus-tol", type=float, default=AnalyticSettings().focus_tol, help="margin bracket [m]")
+    gen.add_argument(
+        "--labelling",
+        choices=LABELLING_PATHS,
+        default=AnalyticSettings().labelling,
+        help="labelling path: 'batched' (states together, re-used solver structure) or 'per_state' (the reference)",
+    )
     gen.add_argument("--quiet", action="store_true")
     summ = sub.add_parser("summary", help="print the manifest and status counts of a dataset")
     summ.add_argument("path")
@@ -321,7 +341,7 @@ def main(argv: list[str] | None = None) -> int:
         n=args.n,
         shard_size=args.shard_size,
         seed=args.seed,
-        settings=AnalyticSettings(friction=args.friction, focus_tol=args.focus_tol),
+        settings=AnalyticSettings(friction=args.friction, focus_tol=args.focus_tol, labelling=args.labelling),
     )
     command = "python -m margin_rl.stability.dataset " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     try:

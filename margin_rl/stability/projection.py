@@ -50,6 +50,10 @@ DEFAULT_MAX_LPS: int = 40
 #: (``feasible_region(focus=...)``): the margin of the focus point is then known to 0.5 mm.
 DEFAULT_FOCUS_TOL: float = 5e-4
 
+# Distance [m] beyond an inner edge's line at which a focus counts as outside it (the polygon
+# module's merge tolerance: below it the support points' noise decides the side).
+_SIDE_TOL: float = 1e-6
+
 # Outcomes of one support-function evaluation in :func:`iterative_projection`.
 SUPPORT_OK: int = 0
 SUPPORT_INFEASIBLE: int = 1
@@ -203,10 +207,15 @@ class _FocusRule:
     def done(self) -> bool:
         xs, ys, fx, fy, lo_hi = self.hull.xs, self.hull.ys, self.fx, self.fy, self.lo_hi
         # Sign of the bracket ends: inside P_in iff left of every inner edge (CCW), inside P_out
-        # iff on the inner side of every support line.
+        # iff on the inner side of every support line. An edge between two nearly coincident support
+        # points (solver noise, ~1e-9 m apart) has an arbitrary direction, so the focus only counts as
+        # right of an edge when it is farther than _SIDE_TOL from its line (measured: a focus 97 mm
+        # inside read as outside, and the projection ran to max_lps).
         m = len(self.hull.angles)
         inside_in = m >= 3 and all(
-            (xs[(k + 1) % m] - xs[k]) * (fy - ys[k]) - (ys[(k + 1) % m] - ys[k]) * (fx - xs[k]) >= 0.0 for k in range(m)
+            (xs[(k + 1) % m] - xs[k]) * (fy - ys[k]) - (ys[(k + 1) % m] - ys[k]) * (fx - xs[k])
+            >= -_SIDE_TOL * math.hypot(xs[(k + 1) % m] - xs[k], ys[(k + 1) % m] - ys[k])
+            for k in range(m)
         )
         # Slack of the focus w.r.t. each support line a_k . c <= a_k . p_k.
         slack = min(h - cx * fx - sy * fy for (cx, sy), h in zip(self.dirs, self.offsets, strict=True))
@@ -225,7 +234,14 @@ class _FocusRule:
         m = len(self.hull.angles)
         candidates = [k for k in range(m) if not frozen[k] and abs(lo_hi[k][1] - lo_hi[k][0]) > 0.05 * focus_tol]
         if not candidates:
-            return None
+            # A focus inside a cap (outside P_in, inside P_out) can be as far from its inner edge as from
+            # its outer polyline while the bracket is as wide as the cap (measured: 10 mm, left
+            # unrefined): refine the open cap nearest to the focus then.
+            caps = self.hull.caps
+            candidates = [k for k in range(m) if not frozen[k] and caps[k] > 0.0]
+            if not candidates:
+                return None
+            return min(candidates, key=lambda k: lo_hi[k][0])
         return min(candidates, key=lambda k: min(lo_hi[k]))
 
     def freeze(self, k: int) -> None:

@@ -190,8 +190,8 @@ __all__ = [
 #: Default half-size of the clipping box on c_xy [m]; far beyond any leg's reach.
 DEFAULT_EXTENT: float = 10.0
 
-# A vertex within this distance [m] of the clipping box marks the region "unbounded".
-_BOX_TOL: float = 1e-6
+#: A vertex within this distance [m] of the clipping box marks the region "unbounded".
+UNBOUNDED_TOL: float = 1e-6
 
 FloatArray = NDArray[np.float64]
 
@@ -332,21 +332,46 @@ def _fill_equilibrium(a: FloatArray, b: FloatArray, feet: FloatArray, force: Flo
 
     With c = (c_x, c_y, 0): -(c x F) = (-c_y F_z, c_x F_z, -(c_x F_y - c_y F_x)). Column 4 + 3 i + j
     holds component j of f_i, so row 3 gets (p_i x f_i)_x = p_y f_z - p_z f_y as -p_z at f_y and p_y
-    at f_z, and so on.
+    at f_z, and so on. Leading axes are states: ``a`` (..., rows, cols), ``feet`` (..., n, 3), ``force``
+    and ``moment`` (..., 3) (one state, or a batch with :mod:`~margin_rl.stability.region_batch`).
     """
-    fx, fy, fz = force
-    a[0, 4::3] = a[1, 5::3] = a[2, 6::3] = 1.0  # sum_i f_i
-    a[3, 1] = -fz
-    a[4, 0] = fz
-    a[5, 0] = -fy
-    a[5, 1] = fx
-    a[3, 2] = a[4, 3] = 1.0  # W_x, W_y
-    px, py, pz = feet[:, 0], feet[:, 1], feet[:, 2]
-    a[3, 5::3], a[3, 6::3] = -pz, py
-    a[4, 4::3], a[4, 6::3] = pz, -px
-    a[5, 4::3], a[5, 5::3] = -py, px
-    b[0:3] = force
-    b[3:6] = moment
+    fx, fy, fz = force[..., 0], force[..., 1], force[..., 2]
+    a[..., 0, 4::3] = a[..., 1, 5::3] = a[..., 2, 6::3] = 1.0  # sum_i f_i
+    a[..., 3, 1] = -fz
+    a[..., 4, 0] = fz
+    a[..., 5, 0] = -fy
+    a[..., 5, 1] = fx
+    a[..., 3, 2] = a[..., 4, 3] = 1.0  # W_x, W_y
+    px, py, pz = feet[..., 0], feet[..., 1], feet[..., 2]
+    a[..., 3, 5::3], a[..., 3, 6::3] = -pz, py
+    a[..., 4, 4::3], a[..., 4, 6::3] = pz, -px
+    a[..., 5, 4::3], a[..., 5, 5::3] = -py, px
+    b[..., 0:3] = force
+    b[..., 3:6] = moment
+
+
+def _torque_blocks(jac: FloatArray, lo: FloatArray, hi: FloatArray, bias: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Per-foot torque rows ``J_i^T f_i <= delta_i - lo_i`` and ``-J_i^T f_i <= hi_i - delta_i``: blocks
+    (..., n, 2 k, 3) and right-hand sides (..., n, 2 k), from jac (..., n, 3, k) and (..., n, k) arrays."""
+    jt = np.swapaxes(jac, -1, -2)  # (..., n, k, 3)
+    return np.concatenate([jt, -jt], axis=-2), np.concatenate([bias - lo, hi - bias], axis=-1)
+
+
+def _friction_blocks(normals: FloatArray, mu: Any, n_faces: int) -> FloatArray:
+    """Per-foot friction rows (..., n, r, 3) from unit normals (..., n, 3) and mu (scalar or (...,)).
+
+    Pyramid (``n_faces`` k > 0): d_j^T f - mu cos(pi/k) n^T f <= 0 for the k face directions d_j, then
+    -n^T f <= 0 (r = k + 1, non-negative cone). Cone (k = 0): s = -A f = (mu n^T f, t1^T f, t2^T f) in
+    the second-order cone (r = 3).
+    """
+    t1, t2 = tangent_bases(normals)
+    mu_b = np.asarray(mu)[..., None, None]  # broadcasts over (n, 3)
+    if n_faces:
+        th = 2.0 * np.pi * np.arange(n_faces) / n_faces
+        d = np.cos(th)[:, None] * t1[..., None, :] + np.sin(th)[:, None] * t2[..., None, :]
+        faces = d - (mu_b[..., None] * math.cos(math.pi / n_faces)) * normals[..., None, :]
+        return np.concatenate([faces, -normals[..., None, :]], axis=-2)
+    return -np.stack([mu_b * normals, t1, t2], axis=-2)
 
 
 def _build_problem(
@@ -376,23 +401,12 @@ def _build_problem(
     n_var = 4 + 3 * n
 
     # Torque rows: J_i^T f_i <= delta_i - lo_i and -J_i^T f_i <= hi_i - delta_i.
-    jt = np.transpose(jac, (0, 2, 1))  # (n, k, 3)
-    tau_blocks = np.concatenate([jt, -jt], axis=1)
-    tau_b = np.concatenate([bias - lo, hi - bias], axis=1).ravel()
+    tau_blocks, tau_bounds = _torque_blocks(jac, lo, hi, bias)
+    tau_b = tau_bounds.ravel()
     finite = np.isfinite(tau_b)
     all_finite = bool(finite.all())
     n_tau = tau_b.size if all_finite else int(finite.sum())
-
-    t1, t2 = tangent_bases(normals)
-    if n_faces:
-        th = 2.0 * np.pi * np.arange(n_faces) / n_faces
-        # d_j^T f - mu cos(pi/k) n^T f <= 0 for the k face directions d_j; then -n^T f <= 0.
-        d = np.cos(th)[None, :, None] * t1[:, None, :] + np.sin(th)[None, :, None] * t2[:, None, :]
-        faces = d - mu * math.cos(math.pi / n_faces) * normals[:, None, :]
-        fric_blocks = np.concatenate([faces, -normals[:, None, :]], axis=1)
-    else:
-        # s = -A f = (mu n^T f, t1^T f, t2^T f) must lie in the second-order cone.
-        fric_blocks = -np.stack([mu * normals, t1, t2], axis=1)
+    fric_blocks = _friction_blocks(normals, mu, n_faces)
     row_fric = _ROW_TORQUE + n_tau
     n_rows = row_fric + fric_blocks.shape[0] * fric_blocks.shape[1]
 
@@ -451,6 +465,11 @@ class _SupportOracle:
         self.n_retries = 0
         self.n_failed = 0
 
+    def _new_robust_solver(self) -> Any:
+        """The retry solver (iterative refinement on) of the current program."""
+        prob = self._prob
+        return clarabel.DefaultSolver(_zero_p(prob.n_var), self._q, prob.A, prob.b, prob.cones, _ROBUST_SETTINGS)
+
     def _solve(self, solver: Any, ax: float, ay: float) -> tuple[int, float, float]:
         self.n_solves += 1
         q = self._q
@@ -472,10 +491,7 @@ class _SupportOracle:
             # Interior-point infeasibility certificates are reliable: no second opinion.
             return out
         if self._robust is None:
-            prob = self._prob
-            self._robust = clarabel.DefaultSolver(
-                _zero_p(prob.n_var), self._q, prob.A, prob.b, prob.cones, _ROBUST_SETTINGS
-            )
+            self._robust = self._new_robust_solver()
         self.n_retries += 1
         out = self._solve(self._robust, ax, ay)
         if out[0] == SUPPORT_FAILED:
@@ -579,7 +595,7 @@ def solve_region(
     elif oracle.n_failed:
         notes.append(f"{oracle.n_failed} direction(s) failed to solve and were replaced by their cap's bisector")
     status = "ok"
-    if (np.abs(verts) >= extent_v - _BOX_TOL).any():
+    if (np.abs(verts) >= extent_v - UNBOUNDED_TOL).any():
         status = "unbounded"
         notes.append(f"region reaches the clipping box |c| <= {extent_v} m")
     return FeasibleRegion(

@@ -1,0 +1,121 @@
+"""Speed of the seed 000 §V-B walk problem: learned margin (CasADi, exact gradient) vs analytic margin +
+finite differences, side by side in one process.
+
+    taskset -c 0 .venv/bin/python benchmarks/bench_planning.py --repeats 3 --analytic-iterations 8
+
+The problem: ANYmal C (or --robot), walk gait, T = 3 s, dT = 0.2 s, from standing at rest to a target
+0.45 m ahead at the walk's speed, on the ``course`` map at its start (flat there) or --scenario.
+Rows: IPOPT iterations, total solve time and time per iteration (medians over repeats); the analytic
+variant is capped at --analytic-iterations iterations (each takes about a second), so only its time per
+iteration compares; a third row without any margin constraint shows the rest of the problem's cost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+
+import numpy as np
+
+from margin_rl.planning import WALK, BaseState, PlannerConfig, TrajectoryProblem, get_scenario, planning_robot
+from margin_rl.robot import load_robot
+from margin_rl.stability import LearnedMargin
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robot", default="anymal_c")
+    parser.add_argument("--scenario", default="course")
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--analytic-iterations", type=int, default=8)
+    parser.add_argument("--json", default=None, help="also write the results here")
+    args = parser.parse_args()
+
+    robot = load_robot(args.robot)
+    model = planning_robot(robot)
+    margin = LearnedMargin.load(args.robot)
+    hm = get_scenario(args.scenario).height_map
+    h = model.nominal_com_height
+    initial = BaseState([0.0, 0.0, h], np.zeros(3), np.zeros(3), np.zeros(3))
+    target = BaseState([0.45, 0.0, h], np.zeros(3), [WALK.speed, 0.0, 0.0], np.zeros(3))
+    xy = model.nominal_feet_com[:, :2]
+    footholds = np.column_stack([xy, hm.height(xy)])
+
+    variants = {
+        "learned (CasADi MLP, exact gradient)": PlannerConfig(),
+        "analytic + finite differences": PlannerConfig(margin="analytic_fd", max_iter=args.analytic_iterations),
+        "no margin constraint": PlannerConfig(margin="none"),
+    }
+    problems = {}
+    for name, config in variants.items():
+        tic = time.perf_counter()
+        problems[name] = TrajectoryProblem(model, hm, WALK, 0.0, config, margin)
+        problems[name].build_seconds = time.perf_counter() - tic
+    rows: dict[str, list] = {name: [] for name in variants}
+    for _ in range(args.repeats):
+        for name, problem in problems.items():  # interleaved: the rows share the machine's state
+            plan = problem.solve(initial, target, footholds)
+            rows[name].append((plan.iterations, plan.solve_seconds, plan.status))
+
+    # Cost of one margin value + gradient at the 16 nodes, outside IPOPT.
+    import casadi as ca
+
+    learned_problem = problems["learned (CasADi MLP, exact gradient)"]
+    plan = learned_problem.solve(initial, target, footholds)
+    lams = learned_problem.plan_lambdas(plan)
+    from margin_rl.planning.analytic_fd import analytic_margin_function
+    from margin_rl.planning.mlp import margin_function
+
+    n = len(lams)
+    lam_sym = ca.MX.sym("lam", 47, n)
+    f_learned = margin_function(margin, n)
+    g_learned = ca.Function("g_learned", [lam_sym], [f_learned(lam_sym), ca.jacobian(f_learned(lam_sym), lam_sym)])
+    single = ca.MX.sym("lam", 47)
+    f_analytic = analytic_margin_function(robot, 2e-3)
+    g_analytic = ca.Function("g_analytic", [single], [f_analytic(single), ca.jacobian(f_analytic(single), single)])
+    t_learned = []
+    for _ in range(20):
+        tic = time.perf_counter()
+        g_learned(lams.T)
+        t_learned.append(time.perf_counter() - tic)
+    tic = time.perf_counter()
+    for lam in lams:
+        g_analytic(lam)
+    t_analytic = time.perf_counter() - tic
+
+    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    print(
+        f"problem: {args.robot}, walk, {args.scenario}, T = 3.0 s, dT = 0.2 s: "
+        f"{learned_problem.n_decision} variables, {learned_problem.n_constraints} constraints "
+        f"({learned_problem.schedule.n_nodes} margin constraints), {len(learned_problem.schedule.slots)} footholds"
+    )
+    print("| variant | build s | iterations (median) | total s (median) | ms / iteration (median) | status |")
+    print("|---|---|---|---|---|---|")
+    summary = {}
+    for name, values in rows.items():
+        iters = np.array([v[0] for v in values])
+        secs = np.array([v[1] for v in values])
+        per = 1000 * secs / np.maximum(iters, 1)
+        statuses = sorted({v[2] for v in values})
+        print(
+            f"| {name} | {problems[name].build_seconds:.2f} | {np.median(iters):.0f} | {np.median(secs):.3f} "
+            f"| {np.median(per):.1f} | {', '.join(statuses)} |"
+        )
+        summary[name] = {"iterations": iters.tolist(), "seconds": secs.tolist(), "ms_per_iteration": per.tolist()}
+    ratio = np.median(summary["analytic + finite differences"]["ms_per_iteration"]) / np.median(
+        summary["learned (CasADi MLP, exact gradient)"]["ms_per_iteration"]
+    )
+    print(f"per-iteration ratio analytic+FD / learned: {ratio:.0f}x")
+    print(
+        f"margin value + gradient at all {n} nodes: learned {1000 * np.median(t_learned):.2f} ms, "
+        f"analytic + forward differences {1000 * t_analytic:.0f} ms ({t_analytic / np.median(t_learned):.0f}x)"
+    )
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(summary, fh, indent=2)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,107 @@
+"""MP4 of a planned course played back kinematically on the MJCF robot (base pose + IK joint angles).
+
+Each frame: the base orientation R from the plan's roll-pitch-yaw, the joint angles from the analytic
+IK of the four planned foot positions relative to the CoM (with the robot's CoM fixed point, so the
+whole-body CoM sits exactly on the planned one), and the base origin c - R c_B(q). The terrain is a
+MuJoCo height field built from the scenario's map. No dynamics are simulated.
+
+Needs ``imageio`` with ``imageio-ffmpeg`` (``pip install 'margin_rl[video]'``) and a MuJoCo rendering
+backend (``MUJOCO_GL=egl`` headless).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from margin_rl.planning.checks import rotation_kinematics
+from margin_rl.planning.receding import CourseResult
+from margin_rl.robot import Robot
+
+
+class VideoUnavailableError(RuntimeError):
+    """The MP4 cannot be written on this machine (missing package or rendering backend)."""
+
+
+def scene_model(robot: Robot, result: CourseResult):  # -> mujoco.MjModel
+    """The robot MJCF plus a height field of the scenario's map."""
+    import mujoco
+
+    hm = result.scenario.height_map
+    ny, nx = hm.shape
+    x_min, x_max, y_min, y_max = hm.extent
+    low, high = float(hm.heights.min()), float(hm.heights.max())
+    elevation = max(high - low, 1e-3)
+    xml = f"""
+<mujoco model="{robot.name}_plan">
+  <include file="{Path(robot.xml_path).as_posix()}"/>
+  <visual><global offwidth="960" offheight="540"/></visual>
+  <asset>
+    <hfield name="terrain" nrow="{ny}" ncol="{nx}" size="{(x_max - x_min) / 2} {(y_max - y_min) / 2} {elevation} 0.05"/>
+    <texture type="2d" name="grid" builtin="checker" rgb1="0.55 0.6 0.65" rgb2="0.45 0.5 0.55"
+             width="300" height="300"/>
+    <material name="grid" texture="grid" texrepeat="20 8"/>
+  </asset>
+  <worldbody>
+    <light pos="0 0 6" dir="0 0 -1" directional="true"/>
+    <geom name="terrain" type="hfield" hfield="terrain" material="grid"
+          pos="{(x_min + x_max) / 2} {(y_min + y_max) / 2} {low}" contype="0" conaffinity="0"/>
+  </worldbody>
+</mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    model.hfield_data[:] = ((hm.heights - low) / elevation).ravel()
+    return model
+
+
+def joint_configuration(robot: Robot, result: CourseResult, t: float) -> tuple[np.ndarray, bool]:
+    """MuJoCo qpos (19,) of the plan at time t and whether all four feet were reachable."""
+    plan = result.plan_at(t)
+    c, rpy, _, _, _, _ = plan.base_at(t)
+    R = rotation_kinematics(rpy, np.zeros(3), np.zeros(3))[0]
+    feet = plan.foot_centres(result.scenario.height_map, robot.foot_radius, t)
+    solution, com = robot.inverse_kinematics_com_relative((feet - c) @ R)
+    q = np.where(np.isfinite(solution.joint_pos), solution.joint_pos, robot.standing_joint_pos)
+    base = c - R @ np.asarray(com)
+    w = np.sqrt(max(1.0 + np.trace(R), 1e-12)) / 2.0
+    quat = np.array([w, (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w)])
+    return np.concatenate([base, quat, q]), bool(solution.reachable.all())
+
+
+def write_mp4(
+    robot: Robot, result: CourseResult, path: str | Path, fps: int = 25, size: tuple[int, int] = (640, 360)
+) -> Path:
+    """Render the course to ``path`` (MP4).
+
+    Raises:
+        VideoUnavailableError: imageio/imageio-ffmpeg missing, or MuJoCo cannot render here.
+    """
+    try:
+        import imageio.v2 as imageio
+        import imageio_ffmpeg  # noqa: F401  (the MP4 backend)
+    except ImportError as exc:
+        raise VideoUnavailableError(
+            "writing MP4 needs imageio and imageio-ffmpeg: pip install 'margin_rl[video]' (or imageio imageio-ffmpeg)"
+        ) from exc
+    import mujoco
+
+    model = scene_model(robot, result)
+    data = mujoco.MjData(model)
+    try:
+        renderer = mujoco.Renderer(model, height=size[1], width=size[0])
+    except Exception as exc:  # GL backend errors come as several types
+        raise VideoUnavailableError(f"MuJoCo cannot render here ({exc}); set MUJOCO_GL=egl or osmesa") from exc
+    camera = mujoco.MjvCamera()
+    camera.distance, camera.elevation, camera.azimuth = 2.6, -20.0, 120.0
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    times = np.arange(0.0, result.duration, 1.0 / fps)
+    with imageio.get_writer(str(path), fps=fps, codec="libx264", quality=6, macro_block_size=8) as writer:
+        for t in times:
+            data.qpos[:], _ = joint_configuration(robot, result, float(t))
+            mujoco.mj_kinematics(model, data)
+            camera.lookat[:] = data.qpos[0:3]
+            renderer.update_scene(data, camera)
+            writer.append_data(renderer.render())
+    renderer.close()
+    return path

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SOURCE_FOLDERS = {"margin_rl": "margin_rl", "envs": "margin_rl.envs", "train": "margin_rl.train"}
 """Repository folder -> the package it is installed as (pyproject's package-dir)."""
 
-BASE_MODULES = ("margin_rl.atomic", "margin_rl.provenance", "margin_rl.registration")
+BASE_MODULES = ("margin_rl.atomic", "margin_rl.plotting", "margin_rl.provenance", "margin_rl.registration")
 
 
 def layer_of(module: str) -> str:

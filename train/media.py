@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from margin_rl.plotting import save_figure as save_plot
 from margin_rl.train.episodes import Evaluation
 
 VIDEO_HINT = "install it with: pip install 'margin_rl[video]' (imageio, imageio-ffmpeg)"
@@ -31,15 +32,8 @@ def _pyplot() -> Any:
 
 
 def save_figure(fig: Any, path: str | Path) -> Path:
-    """Lay out, write (creating the folder) and close a matplotlib figure; returns the path."""
-    import matplotlib.pyplot as plt  # lazy: see the module docstring (the figure's creator chose the back end)
-
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    """Lay out, write (creating the folder) and close a matplotlib figure at 110 dpi; returns the path."""
+    return save_plot(fig, path, dpi=110)
 
 
 def _anymal_axes(plt: Any, traj: Mapping[str, np.ndarray]) -> Any:

@@ -8,6 +8,7 @@ import numpy as np
 
 from margin_rl.planning.checks import CourseCheck
 from margin_rl.planning.receding import CourseResult
+from margin_rl.plotting import save_figure
 
 LEG_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red")
 LEG_NAMES = ("LF", "RF", "LH", "RH")
@@ -88,9 +89,4 @@ def course_figure(
     ax.set_ylabel("margin [m]")
     ax.set_ylim(max(np.nanmin(check.analytic) - 0.05, -0.3), min(np.nanmax(check.learned) + 0.05, 0.4))
     ax.legend(fontsize=7, ncol=2, loc="lower right")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=80)

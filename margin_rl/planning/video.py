@@ -25,7 +25,11 @@ class VideoUnavailableError(RuntimeError):
 
 
 def scene_model(robot: Robot, result: CourseResult):  # -> mujoco.MjModel
-    """The robot MJCF plus a height field of the scenario's map."""
+    """The robot MJCF plus a visual-only height field of the scenario's map (built with MjSpec).
+
+    MuJoCo stores a height field as values in [0, 1] of its elevation above the geom's position, so the
+    map is shifted by its lowest point and scaled by its height range.
+    """
     import mujoco
 
     hm = result.scenario.height_map
@@ -33,25 +37,24 @@ def scene_model(robot: Robot, result: CourseResult):  # -> mujoco.MjModel
     x_min, x_max, y_min, y_max = hm.extent
     low, high = float(hm.heights.min()), float(hm.heights.max())
     elevation = max(high - low, 1e-3)
-    xml = f"""
-<mujoco model="{robot.name}_plan">
-  <include file="{Path(robot.xml_path).as_posix()}"/>
-  <visual><global offwidth="960" offheight="540"/></visual>
-  <asset>
-    <hfield name="terrain" nrow="{ny}" ncol="{nx}" size="{(x_max - x_min) / 2} {(y_max - y_min) / 2} {elevation} 0.05"/>
-    <texture type="2d" name="grid" builtin="checker" rgb1="0.55 0.6 0.65" rgb2="0.45 0.5 0.55"
-             width="300" height="300"/>
-    <material name="grid" texture="grid" texrepeat="20 8"/>
-  </asset>
-  <worldbody>
-    <light pos="0 0 6" dir="0 0 -1" directional="true"/>
-    <geom name="terrain" type="hfield" hfield="terrain" material="grid"
-          pos="{(x_min + x_max) / 2} {(y_min + y_max) / 2} {low}" contype="0" conaffinity="0"/>
-  </worldbody>
-</mujoco>"""
-    model = mujoco.MjModel.from_xml_string(xml)
-    model.hfield_data[:] = ((hm.heights - low) / elevation).ravel()
-    return model
+    spec = mujoco.MjSpec.from_file(str(Path(robot.xml_path)))
+    spec.visual.global_.offwidth, spec.visual.global_.offheight = 960, 540
+    spec.add_hfield(
+        name="terrain", nrow=ny, ncol=nx, size=[(x_max - x_min) / 2, (y_max - y_min) / 2, elevation, 0.05],
+        userdata=((hm.heights - low) / elevation).ravel().tolist(),
+    )  # fmt: skip
+    spec.add_texture(
+        name="grid", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        rgb1=[0.55, 0.6, 0.65], rgb2=[0.45, 0.5, 0.55], width=300, height=300,
+    )  # fmt: skip
+    material = spec.add_material(name="grid", texrepeat=[20, 8])
+    material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "grid"
+    spec.worldbody.add_light(pos=[0, 0, 6], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    spec.worldbody.add_geom(
+        name="terrain", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname="terrain", material="grid",
+        pos=[(x_min + x_max) / 2, (y_min + y_max) / 2, low], contype=0, conaffinity=0,
+    )  # fmt: skip
+    return spec.compile()
 
 
 def joint_configuration(robot: Robot, result: CourseResult, t: float) -> tuple[np.ndarray, bool]:

@@ -19,16 +19,22 @@ name`` imports), where users import them.
 * ``model.export_onnx(path)``: ONNX for C++ users;
 * ``model.out_of_distribution(lam)``: True where lambda leaves the per-field ranges seen in training
   (``model.outside_ranges(lam)``: which entries).
+
+Weights with ``architecture="physics"`` (``model.architecture``) feed the same layers with [lambda, the
+physics features of :mod:`~margin_rl.stability.features`] and add ``proxy_weight`` x the analytic proxy;
+every entry point above still takes raw lambda, and the gradient chains the features' exact Jacobian.
 """
 
 from __future__ import annotations
 
 import json
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from margin_rl.provenance import sha256_file
+from margin_rl.stability.features import PROXY_INDEX, physics_features, physics_features_and_jacobian
 from margin_rl.stability.lambda_state import LAMBDA_DIM, LAMBDA_FIELDS, check_lambda
 from margin_rl.stability.mlp_weights import ARCHITECTURE as ARCHITECTURE
 from margin_rl.stability.mlp_weights import WEIGHTS_FORMAT, MarginWeights, WeightsError, layout_signature, weights_path
@@ -51,6 +57,8 @@ class LearnedMargin:
         self.params = weights
         self.card = dict(card or {})
         self.name = name
+        self.architecture = weights.architecture
+        self._constants = weights.constants if weights.architecture == "physics" else None
         # Fold the input normalisation into the first layer and the output scaling into the last:
         # one matmul chain at inference, in float64 for the single-state path and float32 in batches.
         W = [w.copy() for w in weights.weights]
@@ -104,6 +112,8 @@ class LearnedMargin:
     def __call__(self, lam: np.ndarray) -> float | np.ndarray:
         """m_l [m] of one lambda (47,) -> float, or of a batch (N, 47) -> (N,)."""
         x = check_lambda(lam)
+        if self._constants is not None:
+            return self._physics_value(x)
         if x.ndim == 1:
             h = x
             for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
@@ -124,11 +134,17 @@ class LearnedMargin:
     def value_and_grad(self, lam: np.ndarray) -> tuple[float | np.ndarray, np.ndarray]:
         """(m_l, dm_l/dlambda) by exact backpropagation: (47,) -> (float, (47,)), (N, 47) -> ((N,), (N, 47))."""
         x = check_lambda(lam)
+        if self._constants is not None:
+            return self._physics_value_and_grad(x)
         if x.ndim == 1:
             return self._value_and_grad_one(x)
         h = x
         if h.ndim != 2:
             raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
+        return self._mlp_value_and_grad(h)
+
+    def _mlp_value_and_grad(self, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The network on a batch of (raw) inputs (N, in) and d output / d input (N, in), float64."""
         derivatives = []
         for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
             z = h @ W.T + b
@@ -156,6 +172,40 @@ class LearnedMargin:
             g = (g * d) @ W
         return float(w_last @ h + self._b64[-1][0]), g
 
+    # ------------------------------------------------------------------ the physics architecture
+    def _physics_value(self, x: np.ndarray) -> float | np.ndarray:
+        """[lambda, features] through the layers (float64 for one lambda, float32 in batches) + the proxy."""
+        if x.ndim not in (1, 2):
+            raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
+        batch = x if x.ndim == 2 else x[None, :]
+        features = physics_features(batch, self._constants)
+        z = np.concatenate([batch, features], axis=1)
+        proxy = self.params.proxy_weight * features[:, PROXY_INDEX]
+        if x.ndim == 1:
+            h = z[0]
+            for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
+                h = _softsign(W @ h + b)
+            return float((self._W64[-1] @ h + self._b64[-1])[0] + proxy[0])
+        h = z.astype(np.float32)
+        for WT, b in zip(self._W32T[:-1], self._b32[:-1], strict=True):
+            h = _softsign(h @ WT + b)
+        return (h @ self._W32T[-1] + self._b32[-1])[:, 0].astype(np.float64) + proxy
+
+    def _physics_value_and_grad(self, x: np.ndarray) -> tuple[float | np.ndarray, np.ndarray]:
+        """Chain rule through the features: dm/dlam = dm/dz_lam + dm/dz_f J_f + proxy_weight J_proxy."""
+        if x.ndim not in (1, 2):
+            raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
+        batch = x if x.ndim == 2 else x[None, :]
+        features, jacobian = physics_features_and_jacobian(batch, self._constants)
+        value, g = self._mlp_value_and_grad(np.concatenate([batch, features], axis=1))
+        w = self.params.proxy_weight
+        value = value + w * features[:, PROXY_INDEX]
+        grad = g[:, :LAMBDA_DIM] + np.einsum("nf,nfj->nj", g[:, LAMBDA_DIM:], jacobian)
+        grad += w * jacobian[:, PROXY_INDEX]
+        if x.ndim == 1:
+            return float(value[0]), grad[0]
+        return value, grad
+
     def grad(self, lam: np.ndarray) -> np.ndarray:
         """dm_l/dlambda [m per lambda unit]: (47,) or (N, 47)."""
         return self.value_and_grad(lam)[1]
@@ -181,7 +231,8 @@ class LearnedMargin:
 
     # ------------------------------------------------------------------ torch and ONNX
     def torch_module(self, dtype: object = None):
-        """The network as a ``torch.nn.Module`` mapping raw lambda (..., 47) to m_l (...) [m]."""
+        """The network as a ``torch.nn.Module`` mapping raw lambda (..., 47) to m_l (...) [m]
+        (:class:`~margin_rl.stability.margin_mlp.MarginMLP`, or ``PhysicsMarginMLP`` for physics weights)."""
         # Lazy: torch is heavy, and the numpy paths (environments, dataset workers) never need it.
         from margin_rl.stability.margin_mlp import MarginMLP
 
@@ -194,14 +245,17 @@ class LearnedMargin:
         module = self.torch_module(torch.float32).eval()
         path = Path(path)
         example = torch.zeros(1, LAMBDA_DIM, dtype=torch.float32)
-        torch.onnx.export(
-            module,
-            (example,),
-            str(path),
-            input_names=["lam"],
-            output_names=["margin"],
-            dynamic_axes={"lam": {0: "batch"}, "margin": {0: "batch"}},
-            opset_version=17,
-            dynamo=False,
-        )
+        with warnings.catch_warnings():
+            # The physics features' candidate tables are constants: the tracer's warning about them is moot.
+            warnings.filterwarnings("ignore", category=torch.jit.TracerWarning)
+            torch.onnx.export(
+                module,
+                (example,),
+                str(path),
+                input_names=["lam"],
+                output_names=["margin"],
+                dynamic_axes={"lam": {0: "batch"}, "margin": {0: "batch"}},
+                opset_version=17,
+                dynamo=False,
+            )
         return path

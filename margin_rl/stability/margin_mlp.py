@@ -18,10 +18,16 @@ Two parameterisations of the same 47-256-128-128-1 softsign network:
   entries), which :func:`~margin_rl.stability.training.build_model` fits on the mirror-augmented
   training split. ``to_weights`` expands the tied parameters into ordinary dense matrices, so saved
   weights, the numpy inference, the ONNX export and :meth:`from_weights` are the same for both.
+
+The physics-informed model (:class:`PhysicsMarginMLP`, ``architecture="physics"``) is a :class:`MarginMLP` on
+[lambda, physics features] (:mod:`~margin_rl.stability.features`) plus ``proxy_weight`` x the analytic proxy.
+The features of the mirrored state are a signed permutation of the features, so Q above extends to the
+input [lambda, features] (``input_mirror``) and the same tying keeps the whole model exactly invariant.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
@@ -30,7 +36,16 @@ import torch
 from torch import nn
 from torch.nn import functional
 
-from margin_rl.stability.lambda_state import MIRROR_SIGN, MIRROR_SOURCE, lambda_names
+from margin_rl.stability.features import (
+    INPUT_MIRROR_SIGN,
+    INPUT_MIRROR_SOURCE,
+    PHYSICS_INPUT_DIM,
+    PROXY_INDEX,
+    PhysicsConstants,
+    input_names,
+    physics_features_torch,
+)
+from margin_rl.stability.lambda_state import MIRROR_SIGN, MIRROR_SOURCE
 from margin_rl.stability.mlp_weights import ARCHITECTURE, MarginWeights
 
 
@@ -67,12 +82,20 @@ class MarginMLP(nn.Module):
         widths: tuple[int, ...] = ARCHITECTURE,
     ) -> None:
         super().__init__()
+        # The mirror as a signed permutation of this network's input: lambda's, or that of [lambda, features].
+        mirror_source, mirror_sign = (
+            (INPUT_MIRROR_SOURCE, INPUT_MIRROR_SIGN)
+            if len(input_mean) == PHYSICS_INPUT_DIM
+            else (MIRROR_SOURCE, MIRROR_SIGN)
+        )
         if len(widths) < 2 or widths[0] != len(input_mean) or widths[-1] != 1:
             raise ValueError(f"widths must run from {len(input_mean)} inputs to 1 output, got {widths}")
         self.mirror_tied = bool(mirror_tied)
         self.activation = nn.Softsign()
         if self.mirror_tied:
-            _check_mirror_symmetric(np.asarray(input_mean, float), np.asarray(input_std, float))
+            _check_mirror_symmetric(
+                np.asarray(input_mean, float), np.asarray(input_std, float), mirror_source, mirror_sign
+            )
             halves = [w // 2 for w in widths[1:-1]]
             if any(2 * h != w for h, w in zip(halves, widths[1:-1], strict=True)):
                 raise ValueError(f"mirror_tied needs even hidden widths, got {widths[1:-1]}")
@@ -91,8 +114,8 @@ class MarginMLP(nn.Module):
             )
             fan_in = 2 * halves[-1]
             self.last = nn.ParameterDict({"v": _uniform((1, halves[-1]), fan_in), "e": _uniform((1,), fan_in)})
-            self.register_buffer("mirror_source", torch.as_tensor(MIRROR_SOURCE, dtype=torch.long))
-            self.register_buffer("mirror_sign", torch.as_tensor(MIRROR_SIGN, dtype=dtype))
+            self.register_buffer("mirror_source", torch.as_tensor(mirror_source, dtype=torch.long))
+            self.register_buffer("mirror_sign", torch.as_tensor(mirror_sign, dtype=dtype))
         else:
             self.layers = nn.ModuleList(nn.Linear(widths[i], widths[i + 1]) for i in range(len(widths) - 1))
         self.register_buffer("input_mean", torch.as_tensor(input_mean, dtype=dtype))
@@ -134,8 +157,15 @@ class MarginMLP(nn.Module):
         return self.normalized_forward(x) * self.output_scale[1] + self.output_scale[0]
 
     @classmethod
-    def from_weights(cls, weights: MarginWeights, dtype: torch.dtype | None = None) -> MarginMLP:
-        """Plain module with the given (dense) parameters, in ``dtype`` (float32 by default)."""
+    def from_weights(cls, weights: MarginWeights, dtype: torch.dtype | None = None) -> nn.Module:
+        """Plain module with the given (dense) parameters, in ``dtype`` (float32 by default): a
+        :class:`MarginMLP` for ``"paper"`` weights, a :class:`PhysicsMarginMLP` for ``"physics"``."""
+        if weights.architecture == "physics":
+            return PhysicsMarginMLP.from_weights(weights, dtype)
+        return cls._dense(weights, dtype)
+
+    @classmethod
+    def _dense(cls, weights: MarginWeights, dtype: torch.dtype | None) -> MarginMLP:
         module = cls(
             weights.input_mean,
             weights.input_std,
@@ -144,6 +174,7 @@ class MarginMLP(nn.Module):
             weights.lam_low,
             weights.lam_high,
             dtype=dtype or torch.float32,
+            widths=(weights.weights[0].shape[1], *(w.shape[0] for w in weights.weights)),
         )
         with torch.no_grad():
             for layer, w, b in zip(module.layers, weights.weights, weights.biases, strict=True):
@@ -170,14 +201,62 @@ class MarginMLP(nn.Module):
         )
 
 
-def _check_mirror_symmetric(mean: np.ndarray, std: np.ndarray, rtol: float = 1e-6) -> None:
+def _check_mirror_symmetric(
+    mean: np.ndarray, std: np.ndarray, source: np.ndarray, sign: np.ndarray, rtol: float = 1e-6
+) -> None:
     """Refuse an input normalisation that does not commute with the mirror (names the first bad entry)."""
     scale = np.maximum(np.abs(mean).max(), 1.0)
-    bad_mean = np.abs(mean[MIRROR_SOURCE] * MIRROR_SIGN - mean) > rtol * scale
-    bad_std = np.abs(std[MIRROR_SOURCE] - std) > rtol * np.maximum(std, 1e-12)
+    bad_mean = np.abs(mean[source] * sign - mean) > rtol * scale
+    bad_std = np.abs(std[source] - std) > rtol * np.maximum(std, 1e-12)
     bad = np.nonzero(bad_mean | bad_std)[0]
     if bad.size:
+        name = input_names(len(mean))[bad[0]]
         raise ValueError(
-            f"mirror_tied needs a mirror-symmetric input normalisation; {lambda_names()[bad[0]]} and its mirror "
+            f"mirror_tied needs a mirror-symmetric input normalisation; {name} and its mirror "
             "entry differ: fit the normalisation on mirror-augmented data (training.build_model(..., mirror=True))"
+        )
+
+
+class PhysicsMarginMLP(nn.Module):
+    """The physics-informed margin: ``core([lambda, features(lambda)]) + proxy_weight * proxy(lambda)`` [m].
+
+    ``core`` is a :class:`MarginMLP` whose raw input is [lambda, features] (47 + N_FEATURES entries, its
+    normalisation fitted on them); the features are :func:`~margin_rl.stability.features.physics_features_torch`
+    with the robot's constants, so gradients flow to lambda through them. ``forward(lam)``: (..., 47) -> (...).
+    """
+
+    def __init__(self, core: MarginMLP, constants: PhysicsConstants, proxy_weight: float,
+                 lam_low: np.ndarray, lam_high: np.ndarray) -> None:  # fmt: skip
+        super().__init__()
+        if core.input_mean.shape[0] != PHYSICS_INPUT_DIM:
+            raise ValueError(f"the core needs {PHYSICS_INPUT_DIM} inputs, got {core.input_mean.shape[0]}")
+        self.core = core
+        self.constants = constants
+        self.proxy_weight = float(proxy_weight)
+        dtype = core.input_mean.dtype
+        self.register_buffer("lam_low", torch.as_tensor(lam_low, dtype=dtype))
+        self.register_buffer("lam_high", torch.as_tensor(lam_high, dtype=dtype))
+
+    def forward(self, lam: torch.Tensor) -> torch.Tensor:
+        features = physics_features_torch(lam, self.constants)
+        out = self.core(torch.cat([lam, features], dim=-1))
+        if self.proxy_weight != 0.0:
+            out = out + self.proxy_weight * features[..., PROXY_INDEX]
+        return out
+
+    @classmethod
+    def from_weights(cls, weights: MarginWeights, dtype: torch.dtype | None = None) -> PhysicsMarginMLP:
+        core = MarginMLP._dense(weights, dtype)
+        return cls(core, weights.constants, weights.proxy_weight, weights.lam_low, weights.lam_high)
+
+    def to_weights(self) -> MarginWeights:
+        """Dense parameters of the core with the physics constants, for :func:`save_weights`."""
+        core = self.core.to_weights()
+        return dataclasses.replace(
+            core,
+            lam_low=self.lam_low.detach().cpu().double().numpy(),
+            lam_high=self.lam_high.detach().cpu().double().numpy(),
+            architecture="physics",
+            physics=self.constants.to_array(),
+            proxy_weight=self.proxy_weight,
         )

@@ -3,8 +3,11 @@
 One module for the types both the numpy inference (:mod:`~margin_rl.stability.learned`) and the torch
 module (:mod:`~margin_rl.stability.margin_mlp`) use, so that neither imports the other:
 
-* :data:`ARCHITECTURE` (the layer widths of seed 000 §IV-A) and :class:`MarginWeights` (the parameters in
-  plain numpy, validated against the architecture and the lambda layout);
+* :data:`ARCHITECTURE` (the layer widths of seed 000 §IV-A), :data:`ARCHITECTURES` (``"paper"``: that
+  network on raw lambda; ``"physics"``: the same hidden layers on [lambda, the physics features of
+  :mod:`~margin_rl.stability.features`], plus ``proxy_weight`` times the analytic proxy) and
+  :class:`MarginWeights` (the parameters in plain numpy, validated against the architecture and the lambda
+  layout);
 * the bundled files: :func:`weights_dir`, :func:`bundled_robots`, :func:`weights_path`;
 * :func:`save_weights` (``<path>.npz`` and its model card ``<path>.json``), :func:`layout_signature`,
   :data:`WEIGHTS_FORMAT` and :class:`WeightsError`.
@@ -22,13 +25,16 @@ import numpy as np
 
 from margin_rl.atomic import atomic_savez, atomic_write_text
 from margin_rl.provenance import sha256_file
+from margin_rl.stability.features import N_FEATURES, PhysicsConstants, feature_names
 from margin_rl.stability.lambda_state import LAMBDA_DIM, LAMBDA_FIELDS, lambda_names
 
 __all__ = [
     "ARCHITECTURE",
+    "ARCHITECTURES",
     "WEIGHTS_FORMAT",
     "MarginWeights",
     "WeightsError",
+    "architecture_widths",
     "bundled_robots",
     "layout_signature",
     "save_weights",
@@ -38,6 +44,24 @@ __all__ = [
 
 ARCHITECTURE: tuple[int, ...] = (LAMBDA_DIM, 256, 128, 128, 1)
 """Layer widths of seed 000 §IV-A."""
+
+ARCHITECTURES: tuple[str, ...] = ("paper", "physics")
+"""``paper``: :data:`ARCHITECTURE` on raw lambda. ``physics``: the same hidden layers on
+[lambda, physics features] (47 + N_FEATURES inputs), output plus ``proxy_weight`` x the analytic proxy."""
+
+
+def architecture_widths(architecture: str) -> tuple[int, ...]:
+    """Layer widths of a named architecture.
+
+    Raises:
+        WeightsError: an unknown name (lists the known ones).
+    """
+    if architecture == "paper":
+        return ARCHITECTURE
+    if architecture == "physics":
+        return (LAMBDA_DIM + N_FEATURES, *ARCHITECTURE[1:])
+    raise WeightsError(f"unknown architecture {architecture!r}; known: {', '.join(ARCHITECTURES)}")
+
 
 WEIGHTS_FORMAT = 1
 
@@ -78,27 +102,54 @@ def weights_path(robot_or_path: str | Path) -> Path:
 
 @dataclass(frozen=True)
 class MarginWeights:
-    """Parameters of the margin MLP in plain numpy (float32 on disk)."""
+    """Parameters of the margin MLP in plain numpy (float32 on disk).
+
+    For ``architecture="physics"`` the network's input is [lambda, features] (47 + N_FEATURES entries, so
+    ``input_mean``/``input_std`` have that length), ``physics`` holds the feature constants (mass [kg],
+    gravity [m/s^2], foot radius [m]) and the output adds ``proxy_weight`` x the ``support_margin``
+    feature; ``lam_low``/``lam_high`` stay the 47 lambda ranges.
+    """
 
     weights: tuple[np.ndarray, ...]  # W_k (out, in)
     biases: tuple[np.ndarray, ...]  # b_k (out,)
-    input_mean: np.ndarray  # (47,)
-    input_std: np.ndarray  # (47,)
+    input_mean: np.ndarray  # (47,) (physics: (47 + N_FEATURES,))
+    input_std: np.ndarray  # same shape
     output_mean: float  # [m]
     output_std: float  # [m]
     lam_low: np.ndarray  # (47,) smallest value of each entry in the training split
     lam_high: np.ndarray  # (47,) largest value
+    architecture: str = "paper"
+    physics: np.ndarray | None = None  # (3,) PhysicsConstants.to_array() for "physics"
+    proxy_weight: float = 0.0
+
+    @property
+    def constants(self) -> PhysicsConstants:
+        """The feature constants of a physics model."""
+        if self.physics is None:
+            raise WeightsError(f"{self.architecture} weights carry no physics constants")
+        return PhysicsConstants.from_array(self.physics)
 
     def validate(self, source: str = "weights") -> None:
+        expected = architecture_widths(self.architecture)
         widths = [self.weights[0].shape[1]] + [w.shape[0] for w in self.weights]
-        if tuple(widths) != ARCHITECTURE:
-            raise WeightsError(f"{source}: layer widths {widths}, expected {list(ARCHITECTURE)}")
+        if tuple(widths) != expected:
+            raise WeightsError(f"{source}: layer widths {widths}, expected {list(expected)}")
+        if self.architecture == "physics":
+            if self.physics is None or np.shape(self.physics) != (3,):
+                raise WeightsError(f"{source}: physics weights need (mass, gravity, foot_radius)")
+            try:
+                PhysicsConstants.from_array(self.physics)
+            except ValueError as exc:
+                raise WeightsError(f"{source}: {exc}") from exc
+            if not np.isfinite(self.proxy_weight):
+                raise WeightsError(f"{source}: non-finite proxy weight")
         for k, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             if b.shape != (w.shape[0],):
                 raise WeightsError(f"{source}: bias {k} has shape {b.shape}, expected ({w.shape[0]},)")
-        for name in ("input_mean", "input_std", "lam_low", "lam_high"):
-            if getattr(self, name).shape != (LAMBDA_DIM,):
-                raise WeightsError(f"{source}: {name} must have shape ({LAMBDA_DIM},)")
+        for name, size in (("input_mean", expected[0]), ("input_std", expected[0]), ("lam_low", LAMBDA_DIM),
+                           ("lam_high", LAMBDA_DIM)):  # fmt: skip
+            if getattr(self, name).shape != (size,):
+                raise WeightsError(f"{source}: {name} must have shape ({size},)")
         if not np.all(self.input_std > 0) or not self.output_std > 0:
             raise WeightsError(f"{source}: normalisation scales must be positive")
         arrays = [*self.weights, *self.biases, self.input_mean, self.input_std, self.lam_low, self.lam_high]
@@ -115,13 +166,22 @@ class MarginWeights:
             "lam_low": self.lam_low.astype(np.float64),
             "lam_high": self.lam_high.astype(np.float64),
         }
+        if self.architecture != "paper":  # paper files keep exactly their historical keys
+            out["architecture"] = np.array(self.architecture)  # a unicode scalar: no pickle needed
+            out["physics_constants"] = np.asarray(self.physics, dtype=np.float64)
+            out["proxy_weight"] = np.array([self.proxy_weight], dtype=np.float64)
         return out
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], source: str = "weights") -> MarginWeights:
+        architecture = str(arrays["architecture"]) if "architecture" in arrays else "paper"
+        if architecture not in ARCHITECTURES:
+            raise WeightsError(f"{source}: unknown architecture {architecture!r}; known: {', '.join(ARCHITECTURES)}")
         n_layers = len(ARCHITECTURE) - 1
         required = [f"W{i}" for i in range(n_layers)] + [f"b{i}" for i in range(n_layers)]
         required += ["input_mean", "input_std", "output_scale", "lam_low", "lam_high"]
+        if architecture == "physics":
+            required += ["physics_constants", "proxy_weight"]
         missing = [k for k in required if k not in arrays]
         if missing:
             raise WeightsError(f"{source}: missing arrays {missing}")
@@ -134,6 +194,9 @@ class MarginWeights:
             output_std=float(arrays["output_scale"][1]),
             lam_low=np.asarray(arrays["lam_low"], dtype=np.float64),
             lam_high=np.asarray(arrays["lam_high"], dtype=np.float64),
+            architecture=architecture,
+            physics=np.asarray(arrays["physics_constants"], dtype=np.float64) if architecture == "physics" else None,
+            proxy_weight=float(np.asarray(arrays["proxy_weight"]).reshape(-1)[0]) if architecture == "physics" else 0.0,
         )
         w.validate(source)
         return w
@@ -145,12 +208,23 @@ def save_weights(weights: MarginWeights, path: str | Path, card: dict[str, objec
     weights.validate(str(path))
     npz = path.with_suffix(".npz")
     atomic_savez(npz, **weights.to_arrays())
+    physics = {}
+    if weights.architecture != "paper":
+        constants = weights.constants
+        physics = {
+            "model": weights.architecture,
+            "features": list(feature_names()),
+            "physics_constants": {"mass_kg": constants.mass, "gravity": constants.gravity,
+                                  "foot_radius_m": constants.foot_radius},
+            "proxy_weight": weights.proxy_weight,
+        }  # fmt: skip
     full_card = {
         "format": WEIGHTS_FORMAT,
-        "architecture": list(ARCHITECTURE),
+        "architecture": list(architecture_widths(weights.architecture)),
         "activation": "softsign",
         "lambda_layout": layout_signature(),
         "lambda_names": list(lambda_names()),
+        **physics,
         **card,
         "file": npz.name,
         "sha256": sha256_file(npz),

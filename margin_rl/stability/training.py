@@ -9,6 +9,10 @@ Only samples whose analytic status is ``ok`` are used (the dataset loader counts
 ``--mirror tied`` trains the same-size network with weights tied so that it is exactly invariant under
 the left-right mirror of lambda, a symmetry of the analytic margin (``--mirror augment`` adds mirrored
 copies of the training samples instead).
+``--architecture physics`` trains the physics-informed model instead of the paper's network: the same
+hidden layers on [lambda, physics features] (:mod:`margin_rl.stability.features`: capture point, load-shifted
+support polygon, friction terms), learning the residual over ``--proxy-weight`` x the analytic proxy
+(``support_margin``); the features are computed once per sample in float64 before training.
 The split is seeded (train / validation / test); the input normalisation and the output scaling are
 fitted on the training split and stored with the weights. Adam on the mean squared error of the
 normalised margin, learning rate halved on validation plateaus, early stopping on the validation
@@ -42,9 +46,11 @@ from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_ma
 from margin_rl.stability.dataset import Dataset, load_dataset
 from margin_rl.stability.evaluation import evaluate as evaluate_protocol
 from margin_rl.stability.evaluation import reliability
-from margin_rl.stability.lambda_state import LAMBDA_SLICES, lambda_names, mirror_lambda
+from margin_rl.stability.features import PROXY_INDEX, PhysicsConstants, mirror_inputs, physics_inputs
+from margin_rl.stability.lambda_state import LAMBDA_DIM, LAMBDA_SLICES, lambda_names
 from margin_rl.stability.learned import ARCHITECTURE, LearnedMargin, save_weights
 from margin_rl.stability.margin_mlp import MarginMLP
+from margin_rl.stability.mlp_weights import ARCHITECTURES, MarginWeights, architecture_widths
 
 ACC_BANDS: tuple[tuple[float, float], ...] = ((0.0, 1.0), (1.0, 2.0), (2.0, 3.0), (3.0, np.inf))
 """Bands of |c_ddot_xy| [m/s^2] for the per-band error (the paper: < 1 cm for |c_ddot_x,y| <= 2)."""
@@ -76,6 +82,10 @@ class TrainConfig:
     # training sample (twice the data, the plain network); "tied" trains a network whose weights are tied
     # so that it is exactly mirror-invariant (margin_mlp module docstring; same size and saved format).
     mirror: str = "none"
+    # "paper": the 47-256-128-128-1 network on raw lambda; "physics": the same hidden layers on [lambda,
+    # physics features], output + proxy_weight x the analytic proxy (margin_rl.stability.features).
+    architecture: str = "paper"
+    proxy_weight: float = 1.0  # physics only: the network learns m_a - proxy_weight * support_margin
 
 
 SCHEDULES = ("plateau", "cosine")
@@ -88,6 +98,10 @@ def check_config(config: TrainConfig) -> TrainConfig:
         raise ValueError(f"TrainConfig.schedule must be one of {SCHEDULES}, got {config.schedule!r}")
     if config.mirror not in MIRROR_MODES:
         raise ValueError(f"TrainConfig.mirror must be one of {MIRROR_MODES}, got {config.mirror!r}")
+    if config.architecture not in ARCHITECTURES:
+        raise ValueError(f"TrainConfig.architecture must be one of {ARCHITECTURES}, got {config.architecture!r}")
+    if not np.isfinite(config.proxy_weight):
+        raise ValueError(f"TrainConfig.proxy_weight must be finite, got {config.proxy_weight!r}")
     for name in ("epochs", "batch_size"):
         if getattr(config, name) < 1:
             raise ValueError(f"TrainConfig.{name} must be >= 1, got {getattr(config, name)}")
@@ -115,14 +129,52 @@ def split_indices(n: int, config: TrainConfig) -> Split:
 
 
 def with_mirror_images(lam: np.ndarray, margin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(2N, 47), (2N,): the samples followed by their mirror images (same labels; new arrays)."""
-    return np.concatenate([lam, mirror_lambda(lam)]), np.concatenate([margin, margin])
+    """(2N, in), (2N,): the samples followed by their mirror images (same labels; new arrays).
+
+    ``lam`` is lambda (N, 47) or the physics network's input [lambda, features] (N, 47 + N_FEATURES).
+    """
+    return np.concatenate([lam, mirror_inputs(lam)]), np.concatenate([margin, margin])
+
+
+@dataclass(frozen=True)
+class ModelInputs:
+    """What the network sees for an architecture: its raw inputs and the offset its output is added to."""
+
+    inputs: np.ndarray  # (N, 47) lambda, or (N, 47 + N_FEATURES) [lambda, features]
+    offset: np.ndarray  # (N,) proxy_weight x proxy [m] (zeros for the paper network)
+
+
+def model_inputs(lam: np.ndarray, config: TrainConfig, constants: PhysicsConstants | None = None) -> ModelInputs:
+    """The network inputs and output offset of ``lam`` (N, 47) for ``config.architecture``."""
+    if config.architecture == "paper":
+        return ModelInputs(lam, np.zeros(len(lam)))
+    if constants is None:
+        raise ValueError("the physics architecture needs the robot's PhysicsConstants")
+    inputs = physics_inputs(lam, constants)
+    return ModelInputs(inputs, config.proxy_weight * inputs[:, LAMBDA_DIM + PROXY_INDEX])
+
+
+def to_margin_weights(core: MarginMLP, config: TrainConfig, constants: PhysicsConstants | None = None) -> MarginWeights:
+    """The trained network as saved weights: the core as is (paper), or with the physics constants."""
+    weights = core.to_weights()
+    if config.architecture == "paper":
+        return weights
+    assert constants is not None
+    return dataclasses.replace(
+        weights,
+        lam_low=weights.lam_low[:LAMBDA_DIM],
+        lam_high=weights.lam_high[:LAMBDA_DIM],
+        architecture="physics",
+        physics=constants.to_array(),
+        proxy_weight=config.proxy_weight,
+    )
 
 
 def training_split(lam_train: np.ndarray, margin_train: np.ndarray, config: TrainConfig) -> tuple[np.ndarray, ...]:
     """The samples the optimiser sees: with their mirror images for ``mirror="augment"``, else as given.
 
     A tied network gives a sample and its mirror image the same loss, so ``"tied"`` needs no copies.
+    ``lam_train`` may be [lambda, features] (the physics architecture).
     """
     if config.mirror == "augment":
         return with_mirror_images(lam_train, margin_train)
@@ -133,6 +185,9 @@ def build_model(
     lam_train: np.ndarray, margin_train: np.ndarray, mirror: str = "none", widths: tuple[int, ...] = ARCHITECTURE
 ) -> MarginMLP:
     """A fresh MLP whose normalisation is fitted on the training split (``widths``: see :class:`MarginMLP`).
+
+    ``lam_train`` is the network's raw input: lambda, or [lambda, features] with
+    ``widths=architecture_widths("physics")`` (:func:`model_inputs`).
 
     With ``mirror`` "augment" or "tied" the normalisation and the recorded input ranges are those of the
     split together with its mirror images, so they are mirror-symmetric (needed by the tied network, and
@@ -343,15 +398,18 @@ def train(
     ds: Dataset = load_dataset(data, max_samples=config.max_samples)
     lam, margin = ds.lam.astype(np.float64), ds.margin.astype(np.float64)
     split = split_indices(len(lam), config)
-    torch.manual_seed(config.seed)  # the initial weights
-    model = build_model(lam[split.train], margin[split.train], config.mirror)
-    lam_fit, margin_fit = training_split(lam[split.train], margin[split.train], config)
-    summary = fit(model, lam_fit, margin_fit, lam[split.val], margin[split.val], config, logdir, progress)
-    weights = model.to_weights()
-    learned = LearnedMargin(weights)
-    metrics = test_metrics(learned, lam[split.test], margin[split.test])
     manifest = ds.manifest
     robot = str(manifest["robot"])
+    constants = PhysicsConstants.for_robot(load_robot(robot)) if config.architecture == "physics" else None
+    data_in = model_inputs(lam, config, constants)
+    x, target = data_in.inputs, margin - data_in.offset  # the network learns the residual over the offset
+    torch.manual_seed(config.seed)  # the initial weights
+    model = build_model(x[split.train], target[split.train], config.mirror, architecture_widths(config.architecture))
+    x_fit, target_fit = training_split(x[split.train], target[split.train], config)
+    summary = fit(model, x_fit, target_fit, x[split.val], target[split.val], config, logdir, progress)
+    weights = to_margin_weights(model, config, constants)
+    learned = LearnedMargin(weights)
+    metrics = test_metrics(learned, lam[split.test], margin[split.test])
     settings_dict = dict(manifest["analytic_settings"])  # type: ignore[arg-type]
     settings = AnalyticSettings.from_dict(settings_dict)  # the labels' settings
     grad = {}
@@ -366,7 +424,12 @@ def train(
         )
     card = {
         "robot": robot,
-        "description": "learned stability margin m_l(lambda) [m] of seed 000 §IV (47-256-128-128-1, softsign)"
+        "description": (
+            "learned stability margin m_l(lambda) [m] of seed 000 §IV (47-256-128-128-1, softsign)"
+            if config.architecture == "paper"
+            else "physics-informed learned stability margin m_l(lambda) [m]: MLP (256-128-128-1, softsign) on "
+            "[lambda, physics features] plus proxy_weight x the analytic proxy (margin_rl.stability.features)"
+        )
         + ("; weights tied to be exactly invariant under the left-right mirror" if config.mirror == "tied" else ""),
         "dataset": {
             "path": str(data),
@@ -412,6 +475,15 @@ def main(argv: list[str] | None = None) -> int:
         default=defaults.mirror,
         help="left-right symmetry: none; augment (add mirrored copies); tied (exactly mirror-invariant network)",
     )
+    parser.add_argument(
+        "--architecture",
+        choices=ARCHITECTURES,
+        default=defaults.architecture,
+        help="paper: 47-256-128-128-1 on raw lambda; physics: the same layers on [lambda, physics features] + proxy",
+    )
+    parser.add_argument(
+        "--proxy-weight", type=float, default=defaults.proxy_weight, help="physics: output = net + w x proxy"
+    )
     parser.add_argument("--seed", type=int, default=defaults.seed)
     parser.add_argument("--max-samples", type=int, default=None)
     parser.add_argument("--grad-check-states", type=int, default=defaults.grad_check_states)
@@ -438,6 +510,8 @@ def main(argv: list[str] | None = None) -> int:
         protocol_states=args.protocol_states,
         protocol_sweeps=args.protocol_sweeps,
         mirror=args.mirror,
+        architecture=args.architecture,
+        proxy_weight=args.proxy_weight,
     )
     command = "python -m margin_rl.stability.training " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     card = train(args.data, args.out, config, args.logdir, command, progress=not args.quiet)

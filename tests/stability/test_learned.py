@@ -312,3 +312,169 @@ def test_mirror_training_learns_a_symmetric_target(mirror: str) -> None:
         plain_asymmetry = plain_learned(lam[2500:]) - plain_learned(mirror_lambda(lam[2500:]))
         ratio = np.sqrt(np.mean(asymmetry**2)) / np.sqrt(np.mean(plain_asymmetry**2))
         assert ratio < 0.8
+
+
+# ----------------------------------------------------------------------------- physics-informed architecture
+def random_physics_weights(seed: int = 0, proxy_weight: float = 1.0) -> MarginWeights:
+    from margin_rl.stability.features import PHYSICS_INPUT_DIM
+    from margin_rl.stability.mlp_weights import architecture_widths
+
+    rng = np.random.default_rng(seed)
+    widths = architecture_widths("physics")
+    assert widths == (PHYSICS_INPUT_DIM, *ARCHITECTURE[1:])
+    return MarginWeights(
+        weights=tuple(rng.normal(0, 1 / np.sqrt(widths[i]), (widths[i + 1], widths[i])) for i in range(4)),
+        biases=tuple(rng.normal(0, 0.1, widths[i + 1]) for i in range(4)),
+        input_mean=rng.normal(0, 0.1, PHYSICS_INPUT_DIM),
+        input_std=rng.uniform(0.5, 2.0, PHYSICS_INPUT_DIM),
+        output_mean=-0.1,
+        output_std=0.15,
+        lam_low=-np.full(47, 3.0),
+        lam_high=np.full(47, 3.0),
+        architecture="physics",
+        physics=np.array([50.0, 9.81, 0.03]),
+        proxy_weight=proxy_weight,
+    )
+
+
+def physics_states(n: int, seed: int) -> np.ndarray:
+    from tests.stability.test_features import random_states
+
+    return random_states(n, seed)
+
+
+@pytest.fixture(scope="module")
+def physics_model(tmp_path_factory: pytest.TempPathFactory) -> LearnedMargin:
+    path = tmp_path_factory.mktemp("physics") / "toy_physics"
+    card = save_weights(random_physics_weights(), path, {"robot": "toy"})
+    assert card["model"] == "physics" and card["architecture"][0] == 47 + len(card["features"])
+    assert card["physics_constants"] == {"mass_kg": 50.0, "gravity": 9.81, "foot_radius_m": 0.03}
+    return LearnedMargin.load(path.with_suffix(".npz"))
+
+
+def test_paper_weights_files_keep_their_keys(saved: Path) -> None:
+    with np.load(saved) as data:
+        assert "architecture" not in data.files and "physics_constants" not in data.files
+    assert LearnedMargin.load(saved).architecture == "paper"
+
+
+def test_physics_model_numpy_torch_and_gradient_agree(physics_model: LearnedMargin) -> None:
+    assert physics_model.architecture == "physics" and physics_model.params.proxy_weight == 1.0
+    lam = physics_states(24, seed=4)
+    batch = physics_model(lam)
+    single = np.array([physics_model(x) for x in lam])
+    assert isinstance(single[0], float)
+    np.testing.assert_allclose(batch, single, rtol=1e-5, atol=1e-5)  # float32 batch path
+    module = physics_model.torch_module(torch.float64)
+    x = torch.tensor(lam, requires_grad=True)
+    out = module(x)
+    out.sum().backward()
+    np.testing.assert_allclose(out.detach().numpy(), single, atol=1e-10)
+    value, grad = physics_model.value_and_grad(lam)
+    np.testing.assert_allclose(value, single, atol=1e-10)
+    np.testing.assert_allclose(grad, x.grad.numpy(), atol=1e-9)
+    v1, g1 = physics_model.value_and_grad(lam[5])
+    assert v1 == pytest.approx(single[5], abs=1e-12) and g1.shape == (47,)
+    # independent check: central differences of the numpy forward pass (not across the binary flags)
+    h = 1e-6
+    for j in (3, 9, 20, 30, 45):
+        e = np.zeros(47)
+        e[j] = h
+        fd = (physics_model(lam[0] + e) - physics_model(lam[0] - e)) / (2 * h)
+        assert fd == pytest.approx(grad[0, j], abs=1e-5)
+
+
+def test_physics_model_onnx_export_matches(physics_model: LearnedMargin, tmp_path: Path) -> None:
+    ort = pytest.importorskip("onnxruntime")
+    path = physics_model.export_onnx(tmp_path / "physics.onnx")
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    lam = physics_states(9, seed=5).astype(np.float32)
+    (out,) = session.run(None, {"lam": lam})
+    np.testing.assert_allclose(out, physics_model(lam.astype(np.float64)), atol=2e-5)
+
+
+def test_physics_model_ranges_and_bad_inputs(physics_model: LearnedMargin) -> None:
+    lam = np.zeros((2, 47))
+    lam[:, LAMBDA_SLICES["normals"].start + 2 :: 3] = 1.0
+    lam[1, 5] = 10.0
+    assert physics_model.out_of_distribution(lam).tolist() == [False, True]
+    with pytest.raises(ValueError, match="shape"):
+        physics_model(np.zeros(46))
+    bad = lam[0].copy()
+    bad[LAMBDA_SLICES["mu"]] = np.nan
+    with pytest.raises(ValueError, match="mu"):
+        physics_model.value_and_grad(bad)
+
+
+def test_physics_weights_validation() -> None:
+    w = random_physics_weights()
+    with pytest.raises(WeightsError, match="layer widths"):
+        MarginWeights(**{**w.__dict__, "architecture": "paper"}).validate()
+    with pytest.raises(WeightsError, match="mass, gravity, foot_radius"):
+        MarginWeights(**{**w.__dict__, "physics": None}).validate()
+    with pytest.raises(WeightsError, match="mass"):
+        MarginWeights(**{**w.__dict__, "physics": np.array([-1.0, 9.81, 0.03])}).validate()
+    arrays = w.to_arrays()
+    arrays["architecture"] = np.array("transformer")
+    with pytest.raises(WeightsError, match="unknown architecture"):
+        MarginWeights.from_arrays(arrays)
+    arrays = w.to_arrays()
+    del arrays["proxy_weight"]
+    with pytest.raises(WeightsError, match="missing arrays"):
+        MarginWeights.from_arrays(arrays)
+
+
+def test_tied_physics_model_is_exactly_mirror_invariant() -> None:
+    """Tied weights on [lambda, features]: m(mirror(lam)) = m(lam) in torch (float64, through the features),
+    in the saved dense numpy weights, and the gradient transforms like lambda."""
+    from margin_rl.stability.features import PhysicsConstants
+    from margin_rl.stability.lambda_state import MIRROR_SIGN, MIRROR_SOURCE, mirror_lambda
+    from margin_rl.stability.margin_mlp import PhysicsMarginMLP
+    from margin_rl.stability.training import TrainConfig, build_model, model_inputs, to_margin_weights
+
+    constants = PhysicsConstants(50.0, 9.81, 0.03)
+    config = TrainConfig(architecture="physics", mirror="tied")
+    lam = physics_states(300, seed=6)
+    inputs = model_inputs(lam, config, constants)
+    torch.manual_seed(2)
+    core = build_model(
+        inputs.inputs, np.random.default_rng(0).normal(size=300), "tied", (inputs.inputs.shape[1], 256, 128, 128, 1)
+    )
+    weights = to_margin_weights(core, config, constants)
+    module = PhysicsMarginMLP(core.double(), constants, 1.0, weights.lam_low, weights.lam_high)
+    x, xm = torch.as_tensor(lam[:40]), torch.as_tensor(mirror_lambda(lam[:40]))
+    out = module(x)
+    assert float(out.std()) > 0
+    torch.testing.assert_close(out, module(xm), rtol=0, atol=1e-12)
+    dense = LearnedMargin(weights)
+    np.testing.assert_allclose(dense(lam[:40]), dense(mirror_lambda(lam[:40])), rtol=0, atol=2e-6)
+    np.testing.assert_allclose(dense(lam[:40]), out.detach().numpy(), rtol=0, atol=2e-6)
+    grad, grad_mirrored = dense.grad(lam[:40]), dense.grad(mirror_lambda(lam[:40]))
+    scale = np.abs(grad).max()
+    np.testing.assert_allclose(grad_mirrored, grad[:, MIRROR_SOURCE] * MIRROR_SIGN, rtol=0, atol=1e-5 * scale)
+    assert weights.lam_low.shape == (47,)
+
+
+def test_physics_training_end_to_end(tmp_path: Path) -> None:
+    """The training entry point with --architecture physics: the card records the model and the weights load."""
+    from margin_rl.stability.analytic import AnalyticSettings
+    from margin_rl.stability.dataset import DatasetSpec, generate
+    from margin_rl.stability.training import main
+
+    data = tmp_path / "data"
+    generate(DatasetSpec("anymal_c", 60, 60, 0, AnalyticSettings()), data, workers=1, progress=False)
+    out = tmp_path / "w"
+    args = ["--data", str(data), "--out", str(out), "--epochs", "2", "--grad-check-states", "0"]
+    assert main([*args, "--protocol-states", "0", "--architecture", "physics", "--mirror", "tied", "--quiet"]) == 0
+    model = LearnedMargin.load(out.with_suffix(".npz"))
+    card = json.loads(out.with_suffix(".json").read_text())
+    assert model.architecture == "physics" and card["model"] == "physics"
+    assert card["training"]["architecture"] == "physics" and card["training"]["proxy_weight"] == 1.0
+    assert card["physics_constants"]["mass_kg"] == pytest.approx(52.13485)
+    assert np.isfinite(model(_flat_normals()))  # mu = 0 too: the features stay finite
+
+
+def _flat_normals() -> np.ndarray:
+    lam = np.zeros(47)
+    lam[LAMBDA_SLICES["normals"].start + 2 :: 3] = 1.0
+    return lam

@@ -1,0 +1,130 @@
+"""Paper network vs physics-informed model on the same labelled data, same split, same training budget.
+
+    .venv/bin/python benchmarks/bench_margin_architecture.py --data data/v2_anymal_c_300k --epochs 20 \\
+        --train-subset 75000 --train-subset 0 --recipe paper --recipe physics --recipe physics:0
+
+Every run uses one seeded train / validation / test split of the whole dataset (``training.split_indices``),
+so the test states are the same for every row; ``--train-subset n`` trains on the first n samples of the
+training split (0: all of it), for a learning-curve point. A recipe is ``paper`` or ``physics[:w]`` (``w``
+the proxy weight, default 1: the network learns the residual over the analytic proxy; 0: the features are
+inputs only). ``--mirror`` is shared by every row (default ``tied``, the bundled ANYmal C recipe). Reported
+per row: test RMSE, sign agreement (TPR / TNR), RMSE per number of contacts, the best validation RMSE and
+its epoch, the training time, and (last rows) the analytic proxy alone and its best affine rescaling.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+
+import numpy as np
+import torch
+
+from margin_rl.robot import load_robot
+from margin_rl.stability.dataset import load_dataset
+from margin_rl.stability.evaluation import reliability
+from margin_rl.stability.features import PROXY_INDEX, PhysicsConstants, physics_features
+from margin_rl.stability.learned import LearnedMargin
+from margin_rl.stability.mlp_weights import architecture_widths
+from margin_rl.stability.training import (
+    TrainConfig,
+    build_model,
+    fit,
+    model_inputs,
+    split_indices,
+    test_metrics,
+    to_margin_weights,
+    training_split,
+)
+
+
+def parse_recipe(text: str) -> tuple[str, float]:
+    name, _, weight = text.partition(":")
+    if name not in ("paper", "physics"):
+        raise argparse.ArgumentTypeError(f"recipe must be paper or physics[:w], got {text!r}")
+    return name, float(weight) if weight else 1.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", required=True)
+    parser.add_argument("--recipe", type=parse_recipe, action="append", required=True)
+    parser.add_argument("--train-subset", type=int, action="append", default=None, help="0: the whole train split")
+    parser.add_argument("--epochs", type=int, default=20)
+    parser.add_argument("--batch-size", type=int, default=256)
+    parser.add_argument("--lr", type=float, default=1e-3)
+    parser.add_argument("--mirror", default="tied")
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default=None, help="write the rows as JSON here")
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+
+    ds = load_dataset(args.data)
+    lam, margin = ds.lam.astype(np.float64), ds.margin.astype(np.float64)
+    robot = str(ds.manifest["robot"])
+    constants = PhysicsConstants.for_robot(load_robot(robot))
+    base = TrainConfig(
+        epochs=args.epochs, batch_size=args.batch_size, lr=args.lr, patience=args.epochs, mirror=args.mirror,
+        seed=args.seed, grad_check_states=0, protocol_states=0,
+    )  # fmt: skip
+    split = split_indices(len(lam), base)
+    print(
+        f"{args.data}: {len(lam)} ok samples of {robot}; "
+        f"split {len(split.train)} / {len(split.val)} / {len(split.test)}"
+    )
+    rows = []
+    for subset in args.train_subset or [0]:
+        train = split.train if subset <= 0 else split.train[:subset]
+        for architecture, proxy_weight in args.recipe:
+            config = dataclasses.replace(base, architecture=architecture, proxy_weight=proxy_weight)
+            data_in = model_inputs(lam, config, constants)
+            x, target = data_in.inputs, margin - data_in.offset
+            torch.manual_seed(config.seed)
+            model = build_model(x[train], target[train], config.mirror, architecture_widths(architecture))
+            x_fit, target_fit = training_split(x[train], target[train], config)
+            t0 = time.perf_counter()
+            summary = fit(model, x_fit, target_fit, x[split.val], target[split.val], config, progress=False)
+            seconds = time.perf_counter() - t0
+            learned = LearnedMargin(to_margin_weights(model, config, constants))
+            metrics = test_metrics(learned, lam[split.test], margin[split.test])
+            row = {
+                "recipe": architecture if architecture == "paper" else f"physics:{proxy_weight:g}",
+                "train_samples": len(train),
+                "test_rmse_cm": metrics["rmse_cm"],
+                "sign_agreement": metrics["sign_agreement"],
+                "tpr": metrics["true_positive_rate"],
+                "tnr": metrics["true_negative_rate"],
+                "rmse_cm_by_contacts": {k: v["rmse_cm"] for k, v in metrics["rmse_cm_by_contacts"].items()},
+                "best_val_rmse_cm": summary["best_val_rmse_cm"],
+                "best_epoch": summary["best_epoch"],
+                "last_train_rmse_cm": summary["last_train_rmse_cm"],
+                "train_seconds": seconds,
+            }
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+
+    proxy = physics_features(lam[split.test], constants)[:, PROXY_INDEX]
+    truth = margin[split.test]
+    fit_train = physics_features(lam[split.train], constants)[:, PROXY_INDEX]
+    a, b = np.polyfit(fit_train, margin[split.train], 1)  # affine rescaling fitted on the training split
+    for name, pred in (("proxy alone", proxy), (f"proxy, affine {a:.3f} p + {b:.3f}", a * proxy + b)):
+        signs = reliability(pred, truth)
+        row = {
+            "recipe": name,
+            "test_rmse_cm": 100 * float(np.sqrt(np.mean((pred - truth) ** 2))),
+            "sign_agreement": signs.sign_agreement,
+            "tpr": signs.true_positive_rate,
+            "tnr": signs.true_negative_rate,
+        }
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    if args.out:
+        with open(args.out, "w") as f:
+            json.dump(rows, f, indent=1)
+
+
+if __name__ == "__main__":
+    main()

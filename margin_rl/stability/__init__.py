@@ -14,13 +14,16 @@ Robot-agnostic core (arrays in, arrays out; never imports margin_rl.robot)::
 Robot layer (lambda in R^47, eq. 4)::
 
     lambda_state     LAMBDA_FIELDS, StabilityState, from_lambda: one declaration of lambda's layout
-    sampling         sample_states(robot, n, seed): the Table I sampler
+    sampling         sample_states(robot, n, seed, table): the Table I sampler; LOCOMOTION, Table I widened to
+                     the states walking policies visit (DISTRIBUTIONS by name)
     analytic         analytic_margin(robot, lam): lambda -> IK -> region -> ICP -> m_a (and a batch version)
     contact_batch    the contact problems of many states at once (batched IK, wrenches): the labelling path
     region_batch     the region's conic programs on one fixed sparsity structure per stance, updated per state
     fwp              fwp_feasibility(robot, lam): the feasible-wrench-polytope factor s (seed 004)
     dataset          Table I states labelled with m_a, in resumable shards (python -m margin_rl.stability.dataset)
     mlp_weights      the learned margin's architecture, weights and their files (no torch)
+    features         cheap physics features of lambda (ICP, load-shifted support polygon, friction terms), exact
+                     Jacobians, numpy and torch: the inputs of the "physics" architecture
     learned          LearnedMargin.load(robot): value, gradient, torch module, ONNX
     margin_mlp       the network as a torch module (training, differentiable use)
     training         fit the learned margin on a dataset; evaluation: the paper's protocol; figures

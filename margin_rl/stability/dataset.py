@@ -1,4 +1,8 @@
-"""Analytic-margin datasets: Table I states labelled with m_a, in resumable shards.
+"""Analytic-margin datasets: states labelled with m_a, in resumable shards.
+
+States are drawn from a named distribution (``--distribution``): ``table_i``, seed 000's Table I (the
+default), or ``locomotion``, Table I widened to the states walking policies visit
+(:data:`margin_rl.stability.sampling.LOCOMOTION`); the manifest records which.
 
 Command line::
 
@@ -8,7 +12,7 @@ Command line::
 
 Layout of a dataset directory::
 
-    manifest.json        robot, sampler version, seed, package version, analytic settings (with the
+    manifest.json        robot, sampler version, distribution, seed, package version, analytic settings (with the
                          labelling path that made the labels: "batched" or "per_state"), shard size
     shard_00000.npz      lam (k, 47) float32, margin (k,) float32 [m] (NaN unless ok),
                          status (k,) int8 (index into STATUSES), n_lps (k,) int16, seconds (k,) float32
@@ -45,7 +49,7 @@ from margin_rl.stability.analytic import (
     worker_robot,
 )
 from margin_rl.stability.lambda_state import LAMBDA_DIM
-from margin_rl.stability.sampling import SAMPLER_VERSION, sample_states
+from margin_rl.stability.sampling import DISTRIBUTIONS, SAMPLER_VERSION, sample_states
 
 MANIFEST = "manifest.json"
 FORMAT_VERSION = 1
@@ -64,6 +68,11 @@ class DatasetSpec:
     shard_size: int
     seed: int
     settings: AnalyticSettings
+    distribution: str = "table_i"  # a name of margin_rl.stability.sampling.DISTRIBUTIONS
+
+    def __post_init__(self) -> None:
+        if self.distribution not in DISTRIBUTIONS:
+            raise DatasetError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
 
     @property
     def n_shards(self) -> int:
@@ -79,7 +88,8 @@ class DatasetSpec:
         return (
             f"python -m margin_rl.stability.dataset generate --robot {self.robot} --n {self.n} "
             f"--out {shlex.quote(str(out))} --seed {self.seed} --shard-size {self.shard_size} "
-            f"--friction {friction_arg} --focus-tol {self.settings.focus_tol} --labelling {self.settings.labelling}"
+            f"--friction {friction_arg} --focus-tol {self.settings.focus_tol} --labelling {self.settings.labelling} "
+            f"--distribution {self.distribution}"
         )
 
     def identity(self) -> dict[str, object]:
@@ -88,6 +98,7 @@ class DatasetSpec:
             "format_version": FORMAT_VERSION,
             "robot": self.robot,
             "sampler_version": SAMPLER_VERSION,
+            "distribution": self.distribution,
             "seed": self.seed,
             "shard_size": self.shard_size,
             "analytic_settings": self.settings.as_dict(),
@@ -102,7 +113,7 @@ def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
     """Sample, label and write shard ``index``; returns its status counts. Runs in a worker."""
     robot = worker_robot(spec.robot)
     seed = np.random.SeedSequence(spec.seed, spawn_key=(index,))
-    lams = sample_states(robot, spec.shard_length(index), seed=seed)
+    lams = sample_states(robot, spec.shard_length(index), seed=seed, table=DISTRIBUTIONS[spec.distribution])
     labels = analytic_margin_batch(spec.robot, lams, spec.settings, workers=1)
     atomic_savez(
         shard_path(out, index),
@@ -135,6 +146,7 @@ def _prepare(spec: DatasetSpec, out: Path, command: str) -> list[int]:
         if isinstance(old.get("analytic_settings"), dict):
             # Manifests written before the labelling path was recorded name none: theirs was per state.
             old["analytic_settings"] = AnalyticSettings.from_dict(old["analytic_settings"]).as_dict()
+        old.setdefault("distribution", "table_i")  # manifests from before distributions were named
         mismatched = [k for k, v in identity.items() if old.get(k) != v]
         if mismatched:
             details = "; ".join(f"{k}: {old.get(k)!r} there, {identity[k]!r} asked" for k in mismatched)
@@ -321,6 +333,12 @@ def main(argv: list[str] | None = None) -> int:
         default=AnalyticSettings().labelling,
         help="labelling path: 'batched' (states together, re-used solver structure) or 'per_state' (the reference)",
     )
+    gen.add_argument(
+        "--distribution",
+        choices=sorted(DISTRIBUTIONS),
+        default="table_i",
+        help="state distribution: 'table_i' (seed 000's Table I) or 'locomotion' (widened to walking-policy states)",
+    )
     gen.add_argument("--quiet", action="store_true")
     summ = sub.add_parser("summary", help="print the manifest and status counts of a dataset")
     summ.add_argument("path")
@@ -342,6 +360,7 @@ def main(argv: list[str] | None = None) -> int:
         shard_size=args.shard_size,
         seed=args.seed,
         settings=AnalyticSettings(friction=args.friction, focus_tol=args.focus_tol, labelling=args.labelling),
+        distribution=args.distribution,
     )
     command = "python -m margin_rl.stability.dataset " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     try:

@@ -51,6 +51,9 @@ SAMPLER_VERSION = 1
 
 # Diagonal (trot) pairs of lifted feet, indices into LF, RF, LH, RH.
 _DIAGONAL_PAIRS = np.array([[0, 3], [1, 2]])
+CONTACT_PATTERNS = ("table_i", "any_support")
+# The 15 non-empty contact sets as (15, 4) flags, for contact_patterns="any_support".
+_NON_EMPTY_SUPPORTS = np.array([[(k >> leg) & 1 for leg in range(N_FEET)] for k in range(1, 2**N_FEET)], dtype=float)
 
 
 @dataclass(frozen=True)
@@ -72,12 +75,45 @@ class TableI:
     normal_tilt_std: float = np.pi / 8  # [rad]
     ext_force_std: float = 50.0  # [N]
     ext_torque_std: float = 25.0  # [N m]
+    # "table_i": X lifted feet as above; "any_support": each of the 15 non-empty sets of feet in contact
+    # equally likely (front, hind and lateral pairs, single feet: what walking policies visit).
+    contact_patterns: str = "table_i"
 
     def __post_init__(self) -> None:
         if self.max_lifted_feet not in (0, 1, 2):
             raise ValueError(f"max_lifted_feet must be 0, 1 or 2, got {self.max_lifted_feet}")
+        if self.contact_patterns not in CONTACT_PATTERNS:
+            raise ValueError(f"contact_patterns must be one of {CONTACT_PATTERNS}, got {self.contact_patterns!r}")
         if not self.mu_low > 0 or not self.mu_high > self.mu_low:
             raise ValueError(f"need 0 < mu_low < mu_high, got {self.mu_low}, {self.mu_high}")
+
+
+LOCOMOTION = TableI(
+    roll_pitch_half_width=0.72,
+    com_vel_z_std=0.3,
+    com_acc_xy_half_width=11.0,
+    com_acc_z_half_width=17.5,
+    ang_acc_xy_half_width=240.0,
+    ang_acc_z_std=30.0,
+    mu_high=1.1,
+    foot_x_half_width=0.65,
+    foot_yz_half_width=0.42,
+    ext_force_std=75.0,
+    contact_patterns="any_support",
+)
+"""Table I widened to the states walking policies visit (learned margin v2, item 3).
+
+The ranges cover the 0.5-99.5 percentiles of lambda measured over rollouts of walking policies of ANYmal B
+(the bundled policies, both variants) and C (a 5M-step policy with the margin term), flat and rough ground,
+the command range, pushes and friction randomisation (``benchmarks/bench_locomotion_distribution.py``,
+``docs/learned_margin/locomotion_distribution_anymal_{b,c}.json``): base tilts up to 41 deg, CoM
+accelerations of -10..+17 m/s^2 vertically, base angular accelerations of +-235 rad/s^2 about x, friction
+up to 1.0 (the environments' default), feet crossed or spread by up to 0.62 m, pushes of 150 N, and every
+set of feet in contact. The finite-difference accelerations of the environments are what makes the angular
+ranges this wide (``benchmarks/bench_acceleration_estimates.py``)."""
+
+DISTRIBUTIONS: dict[str, TableI] = {"table_i": TableI(), "locomotion": LOCOMOTION}
+"""The state distributions a dataset can be drawn from, by name (``dataset generate --distribution``)."""
 
 
 def nominal_feet(robot: Robot) -> np.ndarray:
@@ -169,13 +205,16 @@ def _draw(robot: Robot, n: int, rng: np.random.Generator, t: TableI) -> np.ndarr
     def uniform(half_width: float, size: tuple[int, ...] | int) -> np.ndarray:
         return rng.uniform(-half_width, half_width, size=size)
 
-    contacts = np.ones((n, N_FEET))
-    lifted = rng.integers(0, t.max_lifted_feet + 1, size=n)
-    one = np.nonzero(lifted == 1)[0]
-    contacts[one, rng.integers(0, N_FEET, size=one.size)] = 0.0
-    two = np.nonzero(lifted == 2)[0]
-    pairs = _DIAGONAL_PAIRS[rng.integers(0, 2, size=two.size)]
-    contacts[two[:, None], pairs] = 0.0
+    if t.contact_patterns == "any_support":
+        contacts = _NON_EMPTY_SUPPORTS[rng.integers(0, len(_NON_EMPTY_SUPPORTS), size=n)]
+    else:
+        contacts = np.ones((n, N_FEET))
+        lifted = rng.integers(0, t.max_lifted_feet + 1, size=n)
+        one = np.nonzero(lifted == 1)[0]
+        contacts[one, rng.integers(0, N_FEET, size=one.size)] = 0.0
+        two = np.nonzero(lifted == 2)[0]
+        pairs = _DIAGONAL_PAIRS[rng.integers(0, 2, size=two.size)]
+        contacts[two[:, None], pairs] = 0.0
 
     roll = uniform(t.roll_pitch_half_width, n)
     pitch = uniform(t.roll_pitch_half_width, n)

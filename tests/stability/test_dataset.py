@@ -126,3 +126,29 @@ def test_ray_path_with_a_local_instance(tmp_path: Path) -> None:
         with np.load(a) as x, np.load(b) as y:
             np.testing.assert_array_equal(x["lam"], y["lam"])
             np.testing.assert_array_equal(x["status"], y["status"])
+
+
+def test_distribution_is_recorded_and_not_mixed(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from margin_rl.stability.sampling import LOCOMOTION, sample_states
+
+    out = tmp_path / "loco"
+    spec = replace(SPEC, n=10, shard_size=10, distribution="locomotion")
+    generate(spec, out, workers=1, progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["distribution"] == "locomotion" and "--distribution locomotion" in manifest["command"]
+    with np.load(shard_path(out, 0)) as data:
+        expected = sample_states(load_robot("anymal_b"), 10, np.random.SeedSequence(3, spawn_key=(0,)), LOCOMOTION)
+        np.testing.assert_array_equal(data["lam"], expected.astype(np.float32))
+    with pytest.raises(DatasetError, match="distribution"):
+        generate(replace(spec, distribution="table_i"), out, workers=1, progress=False)
+    with pytest.raises(DatasetError, match="distribution must be one of"):
+        replace(SPEC, distribution="walking")
+    # A manifest written before distributions were named is read as Table I and resumes.
+    old = tmp_path / "old"
+    generate(SPEC, old, workers=1, progress=False)
+    manifest = json.loads((old / "manifest.json").read_text())
+    del manifest["distribution"]
+    (old / "manifest.json").write_text(json.dumps(manifest))
+    assert sum(generate(SPEC, old, workers=1, progress=False).values()) == 0

@@ -79,3 +79,59 @@ def test_bad_arguments(robot) -> None:
         sample_states(robot, -1, seed=0)
     with pytest.raises(ValueError, match="max_lifted_feet"):
         TableI(max_lifted_feet=3)
+
+
+def _inside(values: np.ndarray, low: float, high: float) -> float:
+    return float(np.mean((values >= low) & (values <= high)))
+
+
+def test_locomotion_distribution_covers_the_measured_rollout_percentiles(robot) -> None:
+    """LOCOMOTION's ranges contain the 0.5-99.5 percentiles measured on walking-policy rollouts (both robots)."""
+    import json
+    from pathlib import Path
+
+    from margin_rl.stability.lambda_state import lambda_names
+    from margin_rl.stability.sampling import LOCOMOTION
+
+    names = lambda_names()
+    t = LOCOMOTION
+    half = {
+        "com_acc.x": t.com_acc_xy_half_width, "com_acc.y": t.com_acc_xy_half_width, "com_acc.z": t.com_acc_z_half_width,
+        "base_ang_acc.x": t.ang_acc_xy_half_width, "base_ang_acc.y": t.ang_acc_xy_half_width,
+        "base_ang_acc.z": 2.5 * t.ang_acc_z_std, "com_vel.x": t.com_vel_xy_half_width,
+        "com_vel.y": t.com_vel_xy_half_width, "com_vel.z": 3 * t.com_vel_z_std,
+        "gravity_axis.x": np.sin(t.roll_pitch_half_width), "gravity_axis.y": np.sin(t.roll_pitch_half_width),
+    }  # fmt: skip
+    docs = Path(__file__).resolve().parents[2] / "docs" / "learned_margin"
+    for name in ("anymal_b", "anymal_c"):
+        measured = json.loads((docs / f"locomotion_distribution_{name}.json").read_text())["percentiles"]
+        for component, h in half.items():
+            assert -h <= measured["p0.5"][component] and measured["p99.5"][component] <= h, (name, component)
+        assert t.mu_low <= measured["p0.5"]["mu"] and measured["p99.5"]["mu"] <= t.mu_high
+        nominal = nominal_feet(load_robot(name))
+        for leg, key in enumerate(("LF", "RF", "LH", "RH")):
+            for k, axis in enumerate("xyz"):
+                h = t.foot_x_half_width if axis == "x" else t.foot_yz_half_width
+                lo, hi = measured["p0.5"][f"feet.{key}.{axis}"], measured["p99.5"][f"feet.{key}.{axis}"]
+                assert nominal[leg, k] - h <= lo and hi <= nominal[leg, k] + h, (name, key, axis)
+    assert set(names) >= set(half)
+
+
+def test_locomotion_distribution_draws_every_support_and_wide_accelerations(robot) -> None:
+    from margin_rl.stability.sampling import LOCOMOTION
+
+    raw = from_lambda(sample_states(robot, 12000, seed=5, table=LOCOMOTION, reachable_only=False))
+    patterns = {tuple(c) for c in raw.contacts.astype(int).tolist()}
+    assert len(patterns) == 15 and (0, 0, 0, 0) not in patterns  # every non-empty set of feet, never none
+    assert _inside(np.abs(raw.base_ang_acc[:, 0]), 200, 240) > 0.1  # uniform over +-240 rad/s^2
+    assert np.abs(raw.com_acc[:, 2]).max() <= LOCOMOTION.com_acc_z_half_width
+    assert raw.mu.max() > 1.0
+    kept = sample_states(robot, 60, seed=5, table=LOCOMOTION)  # about 0.6 % of raw draws are reachable
+    assert reachable(robot, kept).all()
+    # Table I itself is unchanged by the new option: the same seed gives the same draws as before it existed.
+    np.testing.assert_array_equal(
+        sample_states(robot, 50, seed=7, reachable_only=False),
+        sample_states(robot, 50, seed=7, table=TableI(contact_patterns="table_i"), reachable_only=False),
+    )
+    with pytest.raises(ValueError, match="contact_patterns"):
+        TableI(contact_patterns="all")

@@ -69,6 +69,7 @@ from margin_rl.stability.lambda_state import (
     N_FEET,
     LambdaField,
     check_lambda,
+    float_array_with_last_dim,
 )
 
 __all__ = [
@@ -147,9 +148,7 @@ FEATURE_MIRROR_SOURCE, FEATURE_MIRROR_SIGN = _feature_mirror_map()
 
 def mirror_features(features: np.ndarray) -> np.ndarray:
     """Features of the mirrored state from those of the state: (..., N_FEATURES) -> new array."""
-    arr = np.asarray(features, dtype=float)
-    if arr.ndim == 0 or arr.shape[-1] != N_FEATURES:
-        raise ValueError(f"features must have last dimension {N_FEATURES}, got shape {arr.shape}")
+    arr = float_array_with_last_dim(features, N_FEATURES, "features")
     return arr[..., FEATURE_MIRROR_SOURCE] * FEATURE_MIRROR_SIGN
 
 

@@ -105,12 +105,17 @@ MIRROR_SOURCE, MIRROR_SIGN = _mirror_map()
 """Index map and signs of :func:`mirror_lambda` (an involution: applying it twice is the identity)."""
 
 
+def float_array_with_last_dim(values: np.ndarray, size: int, name: str) -> np.ndarray:
+    """``values`` as a float array of shape (..., size), else a ValueError naming ``name`` and the shape."""
+    arr = np.asarray(values, dtype=float)
+    if arr.ndim == 0 or arr.shape[-1] != size:
+        raise ValueError(f"{name} must have last dimension {size}, got shape {arr.shape}")
+    return arr
+
+
 def _lambda_array(lam: np.ndarray) -> np.ndarray:
     """``lam`` as a float array of shape (..., 47); shape only (NaN is :func:`check_lambda`'s business)."""
-    arr = np.asarray(lam, dtype=float)
-    if arr.ndim == 0 or arr.shape[-1] != LAMBDA_DIM:
-        raise ValueError(f"lambda must have last dimension {LAMBDA_DIM}, got shape {arr.shape}")
-    return arr
+    return float_array_with_last_dim(lam, LAMBDA_DIM, "lambda")
 
 
 def mirror_lambda(lam: np.ndarray) -> np.ndarray:

@@ -110,7 +110,12 @@ the command range, pushes and friction randomisation (``benchmarks/bench_locomot
 accelerations of -10..+17 m/s^2 vertically, base angular accelerations of +-235 rad/s^2 about x, friction
 up to 1.0 (the environments' default), feet crossed or spread by up to 0.62 m, pushes of 150 N, and every
 set of feet in contact. The finite-difference accelerations of the environments are what makes the angular
-ranges this wide (``benchmarks/bench_acceleration_estimates.py``)."""
+ranges this wide (``benchmarks/bench_acceleration_estimates.py``).
+
+The ranges are right, the density is not (measured, BENCHMARKS.md): independent uniform draws over them are
+infeasible 97 % of the time on ANYmal B (Table I: 42 %), because extreme accelerations together admit no
+equilibrium, while the rollouts' extremes are rare and correlated. Use it to check coverage, not yet as a
+training distribution; a sampler of perturbed rollout states is the next step."""
 
 DISTRIBUTIONS: dict[str, TableI] = {"table_i": TableI(), "locomotion": LOCOMOTION}
 """The state distributions a dataset can be drawn from, by name (``dataset generate --distribution``)."""

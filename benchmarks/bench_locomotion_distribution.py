@@ -109,6 +109,12 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=250)
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--figure", type=Path, default=None)
+    parser.add_argument(
+        "--states",
+        type=Path,
+        default=None,
+        help="write every visited lambda here (npz, key 'lam'; data: never committed)",
+    )
     args = parser.parse_args()
     policies = []
     if args.bundle:
@@ -165,6 +171,10 @@ def main() -> None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(record, indent=1) + "\n")
         print(f"\njson: {args.json}")
+    if args.states:
+        args.states.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(args.states, lam=lams.astype(np.float32))
+        print(f"states: {args.states}")
     if args.figure:
         plot(lams, names, low, high, args.figure, args.robot)
         print(f"figure: {args.figure}")

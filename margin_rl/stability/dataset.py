@@ -40,6 +40,7 @@ import numpy as np
 from tqdm import tqdm
 
 from margin_rl.atomic import atomic_savez, atomic_write_text
+from margin_rl.provenance import sha256_file
 from margin_rl.robot import available_robots
 from margin_rl.stability.analytic import (
     LABELLING_PATHS,
@@ -49,7 +50,10 @@ from margin_rl.stability.analytic import (
     worker_robot,
 )
 from margin_rl.stability.lambda_state import LAMBDA_DIM
-from margin_rl.stability.sampling import DISTRIBUTIONS, SAMPLER_VERSION, sample_states
+from margin_rl.stability.sampling import DISTRIBUTIONS, SAMPLER_VERSION, sample_around_states, sample_states
+
+DISTRIBUTION_NAMES: tuple[str, ...] = (*DISTRIBUTIONS, "rollouts")
+"""State distributions of a dataset: the named samplers, and "rollouts" (around recorded states)."""
 
 MANIFEST = "manifest.json"
 FORMAT_VERSION = 1
@@ -68,11 +72,18 @@ class DatasetSpec:
     shard_size: int
     seed: int
     settings: AnalyticSettings
-    distribution: str = "table_i"  # a name of margin_rl.stability.sampling.DISTRIBUTIONS
+    distribution: str = "table_i"  # a name of DISTRIBUTION_NAMES
+    states: str | None = None  # "rollouts": the recorded lambdas (npz, key "lam") the states are drawn around
+    states_sha256: str | None = None  # of that file, so that a dataset names exactly what it was drawn from
 
     def __post_init__(self) -> None:
-        if self.distribution not in DISTRIBUTIONS:
-            raise DatasetError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
+        if self.distribution not in DISTRIBUTION_NAMES:
+            raise DatasetError(f"distribution must be one of {list(DISTRIBUTION_NAMES)}, got {self.distribution!r}")
+        if (self.distribution == "rollouts") != (self.states is not None):
+            raise DatasetError(
+                "distribution 'rollouts' needs --states FILE.npz (recorded lambdas, e.g. from "
+                "benchmarks/bench_locomotion_distribution.py --states), and only it takes one"
+            )
 
     @property
     def n_shards(self) -> int:
@@ -90,6 +101,7 @@ class DatasetSpec:
             f"--out {shlex.quote(str(out))} --seed {self.seed} --shard-size {self.shard_size} "
             f"--friction {friction_arg} --focus-tol {self.settings.focus_tol} --labelling {self.settings.labelling} "
             f"--distribution {self.distribution}"
+            + (f" --states {shlex.quote(self.states)}" if self.states else "")
         )
 
     def identity(self) -> dict[str, object]:
@@ -99,6 +111,7 @@ class DatasetSpec:
             "robot": self.robot,
             "sampler_version": SAMPLER_VERSION,
             "distribution": self.distribution,
+            **({"states_sha256": self.states_sha256} if self.states else {}),
             "seed": self.seed,
             "shard_size": self.shard_size,
             "analytic_settings": self.settings.as_dict(),
@@ -113,7 +126,11 @@ def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
     """Sample, label and write shard ``index``; returns its status counts. Runs in a worker."""
     robot = worker_robot(spec.robot)
     seed = np.random.SeedSequence(spec.seed, spawn_key=(index,))
-    lams = sample_states(robot, spec.shard_length(index), seed=seed, table=DISTRIBUTIONS[spec.distribution])
+    if spec.distribution == "rollouts":
+        with np.load(spec.states) as recorded:
+            lams = sample_around_states(robot, recorded["lam"], spec.shard_length(index), seed=seed)
+    else:
+        lams = sample_states(robot, spec.shard_length(index), seed=seed, table=DISTRIBUTIONS[spec.distribution])
     labels = analytic_margin_batch(spec.robot, lams, spec.settings, workers=1)
     atomic_savez(
         shard_path(out, index),
@@ -335,10 +352,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     gen.add_argument(
         "--distribution",
-        choices=sorted(DISTRIBUTIONS),
+        choices=DISTRIBUTION_NAMES,
         default="table_i",
-        help="state distribution: 'table_i' (seed 000's Table I) or 'locomotion' (widened to walking-policy states)",
+        help="state distribution: 'table_i' (seed 000's Table I), 'locomotion' (Table I widened to walking-policy "
+        "states) or 'rollouts' (around the recorded states of --states)",
     )
+    gen.add_argument("--states", default=None, help="'rollouts': npz of recorded lambdas (key 'lam')")
     gen.add_argument("--quiet", action="store_true")
     summ = sub.add_parser("summary", help="print the manifest and status counts of a dataset")
     summ.add_argument("path")
@@ -361,6 +380,8 @@ def main(argv: list[str] | None = None) -> int:
         seed=args.seed,
         settings=AnalyticSettings(friction=args.friction, focus_tol=args.focus_tol, labelling=args.labelling),
         distribution=args.distribution,
+        states=args.states,
+        states_sha256=sha256_file(args.states) if args.states else None,
     )
     command = "python -m margin_rl.stability.dataset " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     try:

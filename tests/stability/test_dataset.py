@@ -152,3 +152,32 @@ def test_distribution_is_recorded_and_not_mixed(tmp_path: Path) -> None:
     del manifest["distribution"]
     (old / "manifest.json").write_text(json.dumps(manifest))
     assert sum(generate(SPEC, old, workers=1, progress=False).values()) == 0
+
+
+def test_rollouts_distribution_names_its_states_file(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from margin_rl.provenance import sha256_file
+    from margin_rl.stability.sampling import sample_around_states, sample_states
+
+    recorded = sample_states(load_robot("anymal_b"), 50, seed=9)
+    states = tmp_path / "rollouts.npz"
+    np.savez(states, lam=recorded.astype(np.float32))
+    out = tmp_path / "ds"
+    spec = replace(SPEC, n=10, shard_size=10, distribution="rollouts", states=str(states),
+                   states_sha256=sha256_file(states))  # fmt: skip
+    generate(spec, out, workers=1, progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["distribution"] == "rollouts" and manifest["states_sha256"] == sha256_file(states)
+    with np.load(shard_path(out, 0)) as data:
+        expected = sample_around_states(
+            load_robot("anymal_b"), recorded.astype(np.float32), 10, np.random.SeedSequence(3, spawn_key=(0,))
+        )
+        np.testing.assert_array_equal(data["lam"], expected.astype(np.float32))
+    np.savez(states, lam=recorded[::-1].astype(np.float32))  # other recorded states: another dataset
+    with pytest.raises(DatasetError, match="states_sha256"):
+        generate(replace(spec, states_sha256=sha256_file(states)), out, workers=1, progress=False)
+    with pytest.raises(DatasetError, match="needs --states"):
+        replace(SPEC, distribution="rollouts")
+    with pytest.raises(DatasetError, match="needs --states"):
+        replace(SPEC, states=str(states))

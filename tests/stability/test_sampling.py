@@ -135,3 +135,44 @@ def test_locomotion_distribution_draws_every_support_and_wide_accelerations(robo
     )
     with pytest.raises(ValueError, match="contact_patterns"):
         TableI(contact_patterns="all")
+
+
+def test_sample_around_states_follows_the_recorded_states(robot) -> None:
+    from margin_rl.stability.sampling import RolloutJitter, sample_around_states
+
+    recorded = sample_states(robot, 300, seed=11)
+    exact = sample_around_states(robot, recorded, 200, seed=1, jitter=RolloutJitter(0.0, 0.0), reachable_only=False)
+    rows = {tuple(np.round(r, 9)) for r in recorded}
+    assert all(tuple(np.round(r, 9)) in rows for r in exact)  # no jitter: recorded states only
+    drawn = sample_around_states(robot, recorded, 400, seed=2)
+    np.testing.assert_array_equal(drawn, sample_around_states(robot, recorded, 400, seed=2))
+    assert reachable(robot, drawn).all()
+    st = from_lambda(drawn)
+    np.testing.assert_allclose(np.linalg.norm(st.gravity_axis, axis=-1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(st.normals, axis=-1), 1.0, atol=1e-12)
+    assert st.mu.min() >= RolloutJitter().min_mu
+    # The perturbation is about noise_fraction of each entry's spread over the recorded states.
+    raw = sample_around_states(robot, recorded, 4000, seed=3, jitter=RolloutJitter(0.1, 0.0), reachable_only=False)
+    spread = from_lambda(raw).com_acc.std(axis=0) / from_lambda(recorded).com_acc.std(axis=0)
+    assert np.all((spread > 0.9) & (spread < 1.15))
+    flipped = sample_around_states(robot, recorded, 4000, seed=4, jitter=RolloutJitter(0.0, 0.5), reachable_only=False)
+    assert 0.3 < np.mean(from_lambda(flipped).contacts != 1.0) < 0.7  # Table I states: mostly feet down
+
+
+def test_sample_around_states_refuses_bad_input(robot) -> None:
+    from margin_rl.stability.sampling import RolloutJitter, sample_around_states
+
+    good = sample_states(robot, 5, seed=1)
+    with pytest.raises(ValueError, match="shape"):
+        sample_around_states(robot, good[:, :40], 3, seed=0)
+    with pytest.raises(ValueError, match="M >= 2"):
+        sample_around_states(robot, good[:1], 3, seed=0)
+    bad = good.copy()
+    bad[0, 3] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        sample_around_states(robot, bad, 3, seed=0)
+    with pytest.raises(ValueError, match="non-negative"):
+        sample_around_states(robot, good, -1, seed=0)
+    for kwargs in ({"noise_fraction": -0.1}, {"contact_flip": 1.5}, {"min_mu": 0.0}):
+        with pytest.raises(ValueError, match="RolloutJitter"):
+            RolloutJitter(**kwargs)

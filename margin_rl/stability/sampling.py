@@ -32,6 +32,7 @@ margin. ``reachable_only=False`` returns raw Table I draws.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -195,11 +196,21 @@ def sample_states(
     rng = np.random.default_rng(seed)
     if not reachable_only:
         return _draw(robot, n, rng, t)
+    # Oversample: about 7 % of raw draws are reachable.
+    return _reachable_draws(robot, n, lambda k: _draw(robot, k, rng, t), min_batch=1024, oversample=16)
+
+
+def _reachable_draws(
+    robot: Robot, n: int, draw: Callable[[int], np.ndarray], min_batch: int, oversample: int
+) -> np.ndarray:
+    """``n`` kinematically feasible states (n, 47) from ``draw(k)`` (k raw states), by rejection.
+
+    Each round draws ``max(min_batch, oversample * missing)`` states and keeps the reachable ones, in order.
+    """
     kept: list[np.ndarray] = []
     count = 0
     while count < n:
-        # Oversample: about 7 % of raw draws are reachable.
-        batch = _draw(robot, max(1024, 16 * (n - count)), rng, t)
+        batch = draw(max(min_batch, oversample * (n - count)))
         batch = batch[reachable(robot, batch)]
         kept.append(batch[: n - count])
         count += len(kept[-1])
@@ -321,11 +332,5 @@ def sample_around_states(
     n = int(n)
     if not reachable_only:
         return _perturb(recorded, n, rng, jitter)
-    kept: list[np.ndarray] = []
-    count = 0
-    while count < n:
-        batch = _perturb(recorded, max(256, 2 * (n - count)), rng, jitter)
-        batch = batch[reachable(robot, batch)]
-        kept.append(batch[: n - count])
-        count += len(kept[-1])
-    return np.concatenate(kept) if kept else np.zeros((0, LAMBDA_DIM))
+    # Most perturbed rollout states stay reachable: a small oversampling suffices.
+    return _reachable_draws(robot, n, lambda k: _perturb(recorded, k, rng, jitter), min_batch=256, oversample=2)

@@ -69,6 +69,25 @@ DIVERGED_SPEED = 1e3
 """A generalised velocity above this (m/s, rad/s) marks a simulation as diverged."""
 
 
+def check_finite_outputs(config: EnvConfig, reward: np.ndarray | float, *observations: np.ndarray) -> None:
+    """FloatingPointError if a reward or an observation is NaN or inf.
+
+    The core keeps diverged simulations finite (and flags them in ``info["diverged"]``); what is left is a
+    setting so large that float arithmetic overflows, which no agent should train on. Checked in the core, so
+    every adapter (Gymnasium, SB3, rsl-rl) gets the same error.
+    """
+    bad_observation = not all(np.all(np.isfinite(o)) for o in observations)
+    if not bad_observation and np.all(np.isfinite(reward)):
+        return
+    rnd = config.randomization
+    raise FloatingPointError(
+        f"the {'observation' if bad_observation else 'reward'} is not finite: an EnvConfig value is too large for "
+        f"float arithmetic (margin_weight={config.margin_weight}, alive_bonus={config.alive_bonus}, "
+        f"randomization.observation_noise={rnd.observation_noise}, reset_velocity_noise={rnd.reset_velocity_noise}); "
+        "use values of the order of the defaults"
+    )
+
+
 @dataclass(frozen=True)
 class SimulationState:
     """World-frame state of some environments, read from the batch's arrays (N leading)."""
@@ -295,6 +314,7 @@ class AnymalCore:
             self.reset(ids)
             observation[ids] = self._observe_ids(ids)
         privileged = self.privileged_observation() if cfg.privileged_observations else None
+        check_finite_outputs(cfg, reward, observation, final_observation)
         return StepOutput(observation, reward, terminated, truncated, info, final_observation, privileged)
 
     def _actuate(self, actions: np.ndarray) -> np.ndarray:
@@ -466,7 +486,9 @@ class AnymalCore:
 
     def observe_all(self) -> np.ndarray:
         """Policy observations of every environment (after :meth:`reset`)."""
-        return self._observe_ids(np.arange(self.num_envs))
+        observations = self._observe_ids(np.arange(self.num_envs))
+        check_finite_outputs(self.config, 0.0, observations)
+        return observations
 
     def privileged_observation(self) -> np.ndarray:
         """Critic group: terrain heights around the feet, friction and the current margin."""

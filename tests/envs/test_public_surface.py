@@ -214,6 +214,21 @@ def test_a_value_too_large_for_floats_raises_instead_of_returning_inf() -> None:
         env.reset(seed=0)
 
 
+
+def test_the_core_itself_refuses_non_finite_outputs_for_every_adapter() -> None:
+    """The check sits in AnymalCore, which the SB3 and rsl-rl adapters step directly."""
+    from margin_rl.envs.config import EnvConfig
+    from margin_rl.envs.core import AnymalCore
+
+    noise = RandomizationConfig(observation_noise=1e41)  # float32 observations overflow to inf
+    core = AnymalCore(EnvConfig(robot="anymal_b", margin="none", randomization=noise), 2)
+    core.reset(seed=0)
+    with pytest.raises(FloatingPointError, match=r"observation is not finite"):
+        core.observe_all()
+    with pytest.raises(FloatingPointError, match=r"observation is not finite"):
+        core.step(np.zeros((2, 12)))
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # fuzzing
 # ---------------------------------------------------------------------------------------------------------------------

@@ -11,9 +11,10 @@ Usage:
     python benchmarks/bench_margin_rollout_holdout.py evaluate --robot anymal_b --test data/rollouts_b_test.npz \
         --weights anymal_b --weights data/w_v2_rollouts_b.npz ...
 
-``evaluate`` labels the held-out states with the analytic margin (cached beside the test file) and prints, per
-weights file, the RMSE, median absolute error and sign agreement against it on the ``ok`` states, and the share
-of states outside that network's training ranges.
+``evaluate`` labels the held-out states with the analytic margin m_a and the extended margin m_x
+(:mod:`margin_rl.stability.extended`; cached beside the test file) and prints, per weights file, the RMSE, median
+absolute error and sign agreement against m_a on the ``ok`` states and against m_x on every state that has one,
+and the share of states outside that network's training ranges.
 """
 
 from __future__ import annotations
@@ -23,48 +24,65 @@ from pathlib import Path
 
 import numpy as np
 
-from margin_rl.stability import STATUSES, LearnedMargin, analytic_margin_batch
+from margin_rl import load_robot
+from margin_rl.stability import STATUSES, LearnedMargin
+from margin_rl.stability.extended import extended_margin_batch
 
 
-def split(states: Path, policies: int, block: int, train: Path, test: Path) -> None:
-    """Blocks of ``block`` states cycle through ``policies`` policies (condition-major); the last is held out."""
+def split(states: Path, policies: int, block: int, train: Path, test: Path, held_out: int = -1) -> None:
+    """Blocks of ``block`` states cycle through ``policies`` policies (condition-major); policy ``held_out``
+    (an index in the recording's policy order, default the last) is held out."""
     lam = np.load(states)["lam"]
     if len(lam) % (policies * block):
         raise SystemExit(f"{states}: {len(lam)} states are not whole blocks of {policies} x {block}")
     blocks = lam.reshape(-1, block, lam.shape[1])
     policy = np.arange(len(blocks)) % policies
-    np.savez_compressed(train, lam=blocks[policy != policies - 1].reshape(-1, lam.shape[1]))
-    np.savez_compressed(test, lam=blocks[policy == policies - 1].reshape(-1, lam.shape[1]))
-    held_out = policy == policies - 1
-    print(f"train {train}: {(~held_out).sum() * block} states; test {test}: {held_out.sum() * block}")
+    held = policy == held_out % policies
+    np.savez_compressed(train, lam=blocks[~held].reshape(-1, lam.shape[1]))
+    np.savez_compressed(test, lam=blocks[held].reshape(-1, lam.shape[1]))
+    print(f"train {train}: {(~held).sum() * block} states; test {test}: {held.sum() * block}")
 
 
-def labels(robot: str, test: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    cache = test.with_name(test.stem + "_labels.npz")
+def labels(robot: str, test: Path, workers: int = 2) -> tuple[np.ndarray, ...]:
+    """(lam, m_a, status, m_x) of the held-out states, cached beside the test file."""
+    cache = test.with_name(test.stem + "_labels_v2.npz")
     if cache.is_file():
         with np.load(cache) as z:
-            return z["lam"], z["margin"], z["status"]
+            return z["lam"], z["margin"], z["status"], z["extended"]
     lam = np.load(test)["lam"].astype(float)
     lam = lam[np.isfinite(lam).all(axis=1)]
-    result = analytic_margin_batch(robot, lam, workers=1)
-    margin, status = np.asarray(result.margin), np.asarray(result.status)
-    np.savez(cache, lam=lam, margin=margin, status=status)
-    return lam, margin, status
+    result = extended_margin_batch(load_robot(robot), lam, workers=workers)
+    margin, status = np.asarray(result.analytic.margin), np.asarray(result.status)
+    np.savez(cache, lam=lam, margin=margin, status=status, extended=result.margin)
+    return lam, margin, status, result.margin
+
+
+def scores(pred: np.ndarray, truth: np.ndarray) -> str:
+    err = pred - truth
+    return (
+        f"{100 * np.sqrt(np.mean(err**2)):.1f} cm | {100 * np.median(np.abs(err)):.1f} cm "
+        f"| {100 * np.mean((pred >= 0) == (truth >= 0)):.1f} %"
+    )
 
 
 def evaluate(robot: str, test: Path, weights: list[str]) -> None:
-    lam, margin, status = labels(robot, test)
+    lam, margin, status, extended = labels(robot, test)
     ok = status == STATUSES.index("ok")
-    print(f"{test}: {len(lam)} held-out states, {ok.sum()} with an analytic margin ({100 * ok.mean():.1f} %)\n")
-    print("| weights | RMSE | median abs. error | sign agreement | outside its training ranges |")
-    print("|---|---|---|---|---|")
+    defined = np.isfinite(extended)
+    print(
+        f"{test}: {len(lam)} held-out states, {ok.sum()} with an analytic margin m_a ({100 * ok.mean():.1f} %), "
+        f"{defined.sum()} with an extended margin m_x ({100 * defined.mean():.1f} %)\n"
+    )
+    print(
+        "| weights | vs m_a (ok states): RMSE | median abs. error | sign | vs m_x (all with m_x): RMSE "
+        "| median abs. error | sign | outside its training ranges |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
     for name in weights:
         model = LearnedMargin.load(name)
-        pred = model(lam[ok])
-        err = pred - margin[ok]
+        pred = np.asarray(model(lam))
         print(
-            f"| {name} | {100 * np.sqrt(np.mean(err**2)):.1f} cm | {100 * np.median(np.abs(err)):.1f} cm "
-            f"| {100 * np.mean(np.sign(pred) == np.sign(margin[ok])):.1f} % "
+            f"| {name} | {scores(pred[ok], margin[ok])} | {scores(pred[defined], extended[defined])} "
             f"| {100 * np.mean(model.out_of_distribution(lam)):.0f} % |"
         )
 
@@ -78,13 +96,14 @@ def main() -> None:
     s.add_argument("--block", type=int, required=True, help="states per policy and condition (envs x steps)")
     s.add_argument("--train", type=Path, required=True)
     s.add_argument("--test", type=Path, required=True)
+    s.add_argument("--held-out", type=int, default=-1, help="index of the held-out policy (default: the last)")
     e = sub.add_parser("evaluate")
     e.add_argument("--robot", required=True)
     e.add_argument("--test", type=Path, required=True)
     e.add_argument("--weights", action="append", required=True, help="robot name (bundled) or .npz (repeatable)")
     args = parser.parse_args()
     if args.command == "split":
-        split(args.states, args.policies, args.block, args.train, args.test)
+        split(args.states, args.policies, args.block, args.train, args.test, args.held_out)
     else:
         evaluate(args.robot, args.test, args.weights)
 

@@ -27,6 +27,7 @@ environments in the same step (their last observation is returned separately).
 from __future__ import annotations
 
 import dataclasses
+import os
 from dataclasses import dataclass
 
 import mujoco
@@ -86,6 +87,14 @@ def check_finite_outputs(config: EnvConfig, reward: np.ndarray | float, *observa
         f"randomization.observation_noise={rnd.observation_noise}, reset_velocity_noise={rnd.reset_velocity_noise}); "
         "use values of the order of the defaults"
     )
+
+
+def _usable_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the platform reports one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # macOS, Windows: no affinity API
+        return max(1, os.cpu_count() or 1)
 
 
 @dataclass(frozen=True)
@@ -156,7 +165,9 @@ class AnymalCore:
         self.model = build_model(self.robot, self.terrain, config.terrain_config)
         self.dt = float(self.model.opt.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
-        self.batch = mj_batch.Batch(self.model, nsim=num_envs, nthread=0)
+        # One MuJoCo thread per core this process may run on: nthread=0 would start one per core of the
+        # machine, so several trainings pinned to a few cores each (taskset, cgroups) would oversubscribe.
+        self.batch = mj_batch.Batch(self.model, nsim=num_envs, nthread=_usable_cores())
         self._qpos, self._qvel = self.batch.bind("qpos"), self.batch.bind("qvel")
         self._ctrl, self._xfrc = self.batch.bind("ctrl"), self.batch.bind("xfrc_applied")
         self._sensors, self._site_xpos = self.batch.bind("sensordata"), self.batch.bind("site_xpos")

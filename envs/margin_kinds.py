@@ -2,8 +2,14 @@
 
 ``EnvConfig.margin`` names one of :data:`MARGIN_KINDS`; the core builds its batch margin function with
 :func:`make_margin_function`, and the training and evaluation CLIs offer the same names. Every kind maps
-lambda (N, 47) to a margin (N,) in its own unit; states for which a per-state criterion has no value
-(no equilibrium, no contact, an invalid lambda) get ``floor``, the lower end of the environment's clip.
+lambda (N, 47) to a margin (N,) in its own unit; states for which a per-state criterion has no value get
+``floor``, the lower end of the environment's clip.
+
+The analytic kind is the extended margin m_x (:mod:`margin_rl.stability.extended`): m_a where the Feasible
+Region exists, and where it does not (no equilibrium, no contact) the margin of the relaxed load minus a
+penalty, or the ICP's distance to the support hull, so the reward keeps a slope there instead of the floor.
+Only unreachable feet, a solver error or an invalid lambda get the floor. The learned v2 weights are
+trained on m_x too (their card's ``dataset.target``); weights trained on m_a alone extrapolate there.
 """
 
 from __future__ import annotations
@@ -15,7 +21,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from margin_rl.robot import Robot
-from margin_rl.stability.analytic import analytic_margin
+from margin_rl.stability.extended import extended_margin
 from margin_rl.stability.fwp import fwp_feasibility
 from margin_rl.stability.learned import LearnedMargin
 
@@ -63,7 +69,7 @@ def _learned_margin(robot: Robot, weights: str | None, floor: float) -> MarginFu
 
 
 def _analytic_margin(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
-    return _per_state(lambda x: analytic_margin(robot, x).margin, floor)
+    return _per_state(lambda x: extended_margin(robot, x), floor)
 
 
 def _fwp_factor(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
@@ -88,7 +94,8 @@ MARGIN_KINDS: dict[str, MarginKind] = {
         ),
         MarginKind(
             "analytic",
-            "the analytic margin of seed 000 §III (per env, ~2 ms per env step: validation)",
+            "the analytic margin of seed 000 §III, extended to states without a Feasible Region "
+            "(margin_rl.stability.extended; per env, ~2-15 ms per env step: validation)",
             "m",
             _analytic_margin,
         ),

@@ -15,7 +15,13 @@ Layout of a dataset directory::
     manifest.json        robot, sampler version, distribution, seed, package version, analytic settings (with the
                          labelling path that made the labels: "batched" or "per_state"), shard size
     shard_00000.npz      lam (k, 47) float32, margin (k,) float32 [m] (NaN unless ok),
-                         status (k,) int8 (index into STATUSES), n_lps (k,) int16, seconds (k,) float32
+                         status (k,) int8 (index into STATUSES), n_lps (k,) int16, seconds (k,) float32,
+                         extended (k,) float32 [m] the extended margin m_x (NaN only for unreachable feet
+                         or a solver error), load_fraction (k,) float32 alpha*, source (k,) int8 (index
+                         into margin_rl.stability.extended.SOURCES); format 1 shards have no m_x columns
+
+A network is trained on one target (:func:`load_dataset`): ``"analytic"`` (m_a, the ``ok`` samples) or
+``"extended"`` (m_x, every sample that has one: :mod:`margin_rl.stability.extended`).
 
 Every shard is an independent task with its own seed (``SeedSequence(seed, spawn_key=(shard,))``), so
 the dataset does not depend on the number of workers or on the order shards finish. A shard is
@@ -46,9 +52,9 @@ from margin_rl.stability.analytic import (
     LABELLING_PATHS,
     STATUSES,
     AnalyticSettings,
-    analytic_margin_batch,
     worker_robot,
 )
+from margin_rl.stability.extended import DEFAULT_BISECTION_STEPS, DEFAULT_LOAD_PENALTY, extended_margin_batch
 from margin_rl.stability.lambda_state import LAMBDA_DIM
 from margin_rl.stability.sampling import DISTRIBUTIONS, SAMPLER_VERSION, sample_around_states, sample_states
 
@@ -56,7 +62,10 @@ DISTRIBUTION_NAMES: tuple[str, ...] = (*DISTRIBUTIONS, "rollouts")
 """State distributions of a dataset: the named samplers, and "rollouts" (around recorded states)."""
 
 MANIFEST = "manifest.json"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: shards carry the extended margin m_x (extended, load_fraction, source)
+
+TARGETS: tuple[str, ...] = ("analytic", "extended")
+"""What a network learns from a dataset: m_a on ok samples, or m_x on every sample that has one."""
 
 
 class DatasetError(ValueError):
@@ -75,6 +84,8 @@ class DatasetSpec:
     distribution: str = "table_i"  # a name of DISTRIBUTION_NAMES
     states: str | None = None  # "rollouts": the recorded lambdas (npz, key "lam") the states are drawn around
     states_sha256: str | None = None  # of that file, so that a dataset names exactly what it was drawn from
+    load_penalty: float = DEFAULT_LOAD_PENALTY  # kappa of the extended margin [m]
+    bisection_steps: int = DEFAULT_BISECTION_STEPS  # halvings for alpha* of the extended margin
 
     def __post_init__(self) -> None:
         if self.distribution not in DISTRIBUTION_NAMES:
@@ -100,8 +111,7 @@ class DatasetSpec:
             f"python -m margin_rl.stability.dataset generate --robot {self.robot} --n {self.n} "
             f"--out {shlex.quote(str(out))} --seed {self.seed} --shard-size {self.shard_size} "
             f"--friction {friction_arg} --focus-tol {self.settings.focus_tol} --labelling {self.settings.labelling} "
-            f"--distribution {self.distribution}"
-            + (f" --states {shlex.quote(self.states)}" if self.states else "")
+            f"--distribution {self.distribution}" + (f" --states {shlex.quote(self.states)}" if self.states else "")
         )
 
     def identity(self) -> dict[str, object]:
@@ -115,6 +125,7 @@ class DatasetSpec:
             "seed": self.seed,
             "shard_size": self.shard_size,
             "analytic_settings": self.settings.as_dict(),
+            "extended_margin": {"load_penalty": self.load_penalty, "bisection_steps": self.bisection_steps},
         }
 
 
@@ -131,16 +142,22 @@ def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
             lams = sample_around_states(robot, recorded["lam"], spec.shard_length(index), seed=seed)
     else:
         lams = sample_states(robot, spec.shard_length(index), seed=seed, table=DISTRIBUTIONS[spec.distribution])
-    labels = analytic_margin_batch(spec.robot, lams, spec.settings, workers=1)
+    labels = extended_margin_batch(
+        robot, lams, spec.settings, workers=1, penalty=spec.load_penalty, bisection_steps=spec.bisection_steps
+    )
+    analytic = labels.analytic
     atomic_savez(
         shard_path(out, index),
         lam=lams.astype(np.float32),
-        margin=labels.margin.astype(np.float32),
-        status=labels.status,
-        n_lps=labels.n_lps,
-        seconds=labels.seconds.astype(np.float32),
+        margin=analytic.margin.astype(np.float32),
+        status=analytic.status,
+        n_lps=analytic.n_lps,
+        seconds=analytic.seconds.astype(np.float32),
+        extended=labels.margin.astype(np.float32),
+        load_fraction=labels.load_fraction.astype(np.float32),
+        source=labels.source,
     )
-    return labels.counts()
+    return analytic.counts()
 
 
 def _shard_is_complete(path: Path, length: int) -> bool:
@@ -192,6 +209,9 @@ def _prepare(spec: DatasetSpec, out: Path, command: str) -> list[int]:
             "status": "(k,) int8 index into statuses",
             "n_lps": "(k,) int16 conic programs solved",
             "seconds": "(k,) float32 wall time of the analytic margin",
+            "extended": "(k,) float32 extended margin m_x [m] (margin_rl.stability.extended), NaN where none",
+            "load_fraction": "(k,) float32 alpha*: the supportable fraction of the dynamic load (NaN: fallback)",
+            "source": "(k,) int8 index into margin_rl.stability.extended.SOURCES",
         },
         "command": command,
     }
@@ -286,41 +306,60 @@ def _log(enabled: bool, message: str) -> None:
 
 @dataclass(frozen=True)
 class Dataset:
-    """Samples with status ``ok`` of a dataset directory, plus what was excluded."""
+    """The samples of a dataset directory that have the requested target, plus what was excluded."""
 
     lam: np.ndarray  # (N, 47) float32
-    margin: np.ndarray  # (N,) float32 [m]
+    margin: np.ndarray  # (N,) float32 [m]: m_a ("analytic") or m_x ("extended")
     counts: dict[str, int]  # status counts over all loaded shards
     manifest: dict[str, object]
+    target: str = "analytic"
+    analytic: np.ndarray | None = None  # (N,) float32 m_a of the returned samples (NaN where not ok)
 
 
-def load_dataset(path: str | Path, max_samples: int | None = None) -> Dataset:
-    """Load the ``ok`` samples of a dataset directory (non-ok samples are counted, not returned)."""
+def load_dataset(path: str | Path, max_samples: int | None = None, target: str = "analytic") -> Dataset:
+    """Load the samples of a dataset directory that have ``target`` (others are counted, not returned).
+
+    ``target="analytic"``: the ``ok`` samples and m_a; ``"extended"``: every sample with a finite m_x
+    (ok, infeasible and no-contact states alike), which needs a format-2 dataset.
+    """
+    if target not in TARGETS:
+        raise DatasetError(f"target must be one of {list(TARGETS)}, got {target!r}")
     path = Path(path)
     manifest_path = path / MANIFEST
     if not manifest_path.is_file():
         raise DatasetError(f"{path} is not a margin_rl dataset (no {MANIFEST})")
     manifest = json.loads(manifest_path.read_text())
-    lams, margins = [], []
+    lams, margins, analytic = [], [], []
     counts = dict.fromkeys(manifest.get("statuses", STATUSES), 0)
     n_loaded = 0
     for shard in sorted(path.glob("shard_*.npz")):
         with np.load(shard) as data:
             status = data["status"]
-            ok = status == STATUSES.index("ok")
             for i, name in enumerate(STATUSES):
                 counts[name] += int(np.sum(status == i))
-            lams.append(data["lam"][ok])
-            margins.append(data["margin"][ok])
-            n_loaded += int(ok.sum())
+            if target == "extended":
+                if "extended" not in data:
+                    raise DatasetError(
+                        f"{shard} has no extended margin (a format-1 dataset): train it with target 'analytic', "
+                        "or label a new dataset with this version"
+                    )
+                values = data["extended"]
+                keep = np.isfinite(values)
+            else:
+                values = data["margin"]
+                keep = status == STATUSES.index("ok")
+            lams.append(data["lam"][keep])
+            margins.append(values[keep])
+            analytic.append(np.where(status == STATUSES.index("ok"), data["margin"], np.nan)[keep])
+            n_loaded += int(keep.sum())
         if max_samples is not None and n_loaded >= max_samples:
             break
     if not lams:
         raise DatasetError(f"{path} has no shards yet")
-    lam, margin = np.concatenate(lams), np.concatenate(margins)
+    lam, margin, analytic_margin = np.concatenate(lams), np.concatenate(margins), np.concatenate(analytic)
     if max_samples is not None:
-        lam, margin = lam[:max_samples], margin[:max_samples]
-    return Dataset(lam=lam, margin=margin, counts=counts, manifest=manifest)
+        lam, margin, analytic_margin = lam[:max_samples], margin[:max_samples], analytic_margin[:max_samples]
+    return Dataset(lam=lam, margin=margin, counts=counts, manifest=manifest, target=target, analytic=analytic_margin)
 
 
 def _parse_friction(text: str) -> str | tuple[str, int]:

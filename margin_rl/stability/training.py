@@ -34,6 +34,7 @@ import dataclasses
 import shlex
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,7 +44,7 @@ import torch
 from margin_rl.provenance import git_commit
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
-from margin_rl.stability.dataset import Dataset, load_dataset
+from margin_rl.stability.dataset import TARGETS, Dataset, DatasetError, load_dataset
 from margin_rl.stability.evaluation import evaluate as evaluate_protocol
 from margin_rl.stability.evaluation import reliability
 from margin_rl.stability.features import PROXY_INDEX, PhysicsConstants, mirror_inputs, physics_inputs
@@ -86,6 +87,11 @@ class TrainConfig:
     # physics features], output + proxy_weight x the analytic proxy (margin_rl.stability.features).
     architecture: str = "paper"
     proxy_weight: float = 1.0  # physics only: the network learns m_a - proxy_weight * support_margin
+    # What is learned (margin_rl.stability.dataset.TARGETS): "analytic" m_a on ok states, or "extended" m_x
+    # (margin_rl.stability.extended) on every state that has one, so that the reward has a slope there too.
+    target: str = "analytic"
+    device: str = "cpu"  # torch device of the fit ("cuda" on a GPU machine); the weights are saved the same
+    max_seconds: float | None = None  # wall-time budget of the fit: no new epoch starts after it (None: no limit)
 
 
 SCHEDULES = ("plateau", "cosine")
@@ -98,6 +104,8 @@ def check_config(config: TrainConfig) -> TrainConfig:
         raise ValueError(f"TrainConfig.schedule must be one of {SCHEDULES}, got {config.schedule!r}")
     if config.mirror not in MIRROR_MODES:
         raise ValueError(f"TrainConfig.mirror must be one of {MIRROR_MODES}, got {config.mirror!r}")
+    if config.target not in TARGETS:
+        raise ValueError(f"TrainConfig.target must be one of {TARGETS}, got {config.target!r}")
     if config.architecture not in ARCHITECTURES:
         raise ValueError(f"TrainConfig.architecture must be one of {ARCHITECTURES}, got {config.architecture!r}")
     if not np.isfinite(config.proxy_weight):
@@ -108,6 +116,8 @@ def check_config(config: TrainConfig) -> TrainConfig:
     for name in ("grad_check_states", "protocol_states", "protocol_sweeps"):
         if getattr(config, name) < 0:
             raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(config, name)}")
+    if config.max_seconds is not None and not config.max_seconds > 0:
+        raise ValueError(f"TrainConfig.max_seconds must be > 0 or None, got {config.max_seconds!r}")
     if not config.lr > 0 or not 0 <= config.min_lr <= config.lr:
         raise ValueError(f"need lr > 0 and 0 <= min_lr <= lr, got lr={config.lr}, min_lr={config.min_lr}")
     return config
@@ -238,8 +248,12 @@ def fit(
     check_config(config)
     torch.manual_seed(config.seed)
     generator = torch.Generator().manual_seed(config.seed)
-    x, y = torch.as_tensor(lam_train, dtype=torch.float32), torch.as_tensor(margin_train, dtype=torch.float32)
-    xv, yv = torch.as_tensor(lam_val, dtype=torch.float32), torch.as_tensor(margin_val, dtype=torch.float32)
+    device = torch.device(config.device)
+    model.to(device)
+    x = torch.as_tensor(lam_train, dtype=torch.float32, device=device)
+    y = torch.as_tensor(margin_train, dtype=torch.float32, device=device)
+    xv = torch.as_tensor(lam_val, dtype=torch.float32, device=device)
+    yv = torch.as_tensor(margin_val, dtype=torch.float32, device=device)
     mean, std = model.input_mean, model.input_std
     x_norm = (x - mean) / std  # normalise once; the loss is on the normalised output
     y_norm = (y - model.output_scale[0]) / model.output_scale[1]
@@ -257,10 +271,11 @@ def fit(
 
         writer = SummaryWriter(str(logdir))
     best, best_state, best_epoch, history = np.inf, None, -1, []
+    stopped_by_budget = False
     t0 = time.perf_counter()
     for epoch in range(config.epochs):
         model.train()
-        order = torch.randperm(len(x_norm), generator=generator)
+        order = torch.randperm(len(x_norm), generator=generator).to(device)
         running = 0.0
         for i in range(0, len(order), config.batch_size):
             idx = order[i : i + config.batch_size]
@@ -294,8 +309,12 @@ def fit(
             best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
         elif epoch - best_epoch >= config.patience:
             break
+        if config.max_seconds is not None and time.perf_counter() - t0 > config.max_seconds:
+            stopped_by_budget = True
+            break
     if best_state is not None:
         model.load_state_dict(best_state)
+    model.to("cpu")
     if writer is not None:
         writer.close()
     return {
@@ -305,6 +324,7 @@ def fit(
         "last_train_rmse_cm": history[-1]["train_rmse_cm"] if history else float("nan"),  # last epoch, running mean
         "final_lr": float(optimizer.param_groups[0]["lr"]),
         "train_seconds": time.perf_counter() - t0,
+        "stopped_by_time_budget": stopped_by_budget,
     }
 
 
@@ -385,8 +405,51 @@ def gradient_check(
     }
 
 
+def load_training_data(data: str | Path | Sequence[str | Path], config: TrainConfig) -> tuple[Dataset, list[dict]]:
+    """One dataset directory, or several of the same robot and analytic settings concatenated (e.g. Table I
+    mixed with rollout states); returns the merged :class:`Dataset` (the first one's manifest) and a
+    record of each part for the model card.
+
+    Raises:
+        DatasetError: parts of different robots or analytic settings (names both).
+    """
+    paths = [data] if isinstance(data, (str, Path)) else list(data)
+    if not paths:
+        raise DatasetError("no dataset given: pass at least one --data directory")
+    parts = [load_dataset(p, max_samples=config.max_samples, target=config.target) for p in paths]
+    first = parts[0].manifest
+    for path, part in zip(paths[1:], parts[1:], strict=True):
+        for key in ("robot", "analytic_settings"):
+            if part.manifest.get(key) != first.get(key):
+                raise DatasetError(
+                    f"{path} has {key} {part.manifest.get(key)!r}, {paths[0]} has {first.get(key)!r}: "
+                    "only datasets of one robot and one set of analytic settings can be mixed"
+                )
+    record = [
+        {
+            "path": str(path),
+            "distribution": part.manifest.get("distribution", "table_i"),
+            "generation_command": part.manifest.get("command"),
+            "samples_used": len(part.lam),
+            "status_counts": part.counts,
+        }
+        for path, part in zip(paths, parts, strict=True)
+    ]
+    counts = {k: sum(p.counts.get(k, 0) for p in parts) for k in parts[0].counts}
+    analytic = [p.analytic if p.analytic is not None else np.full(len(p.lam), np.nan) for p in parts]
+    merged = Dataset(
+        lam=np.concatenate([p.lam for p in parts]),
+        margin=np.concatenate([p.margin for p in parts]),
+        counts=counts,
+        manifest=first,
+        target=config.target,
+        analytic=np.concatenate(analytic),
+    )
+    return merged, record
+
+
 def train(
-    data: str | Path,
+    data: str | Path | Sequence[str | Path],
     out: str | Path,
     config: TrainConfig,
     logdir: str | Path | None = None,
@@ -395,7 +458,7 @@ def train(
 ) -> dict[str, object]:
     """Train on ``data`` and write ``<out>.npz`` + ``<out>.json``; returns the model card."""
     check_config(config)
-    ds: Dataset = load_dataset(data, max_samples=config.max_samples)
+    ds, parts = load_training_data(data, config)
     lam, margin = ds.lam.astype(np.float64), ds.margin.astype(np.float64)
     split = split_indices(len(lam), config)
     manifest = ds.manifest
@@ -410,6 +473,9 @@ def train(
     weights = to_margin_weights(model, config, constants)
     learned = LearnedMargin(weights)
     metrics = test_metrics(learned, lam[split.test], margin[split.test])
+    if config.target == "extended":  # the same network judged on m_a where m_a exists (the paper's quantity)
+        ok_test = split.test[np.isfinite(ds.analytic[split.test])]
+        metrics["on_analytic"] = test_metrics(learned, lam[ok_test], ds.analytic[ok_test].astype(np.float64))
     settings_dict = dict(manifest["analytic_settings"])  # type: ignore[arg-type]
     settings = AnalyticSettings.from_dict(settings_dict)  # the labels' settings
     grad = {}
@@ -432,10 +498,13 @@ def train(
         )
         + ("; weights tied to be exactly invariant under the left-right mirror" if config.mirror == "tied" else ""),
         "dataset": {
-            "path": str(data),
+            "path": ", ".join(p["path"] for p in parts),
+            "parts": parts,
             "samples_total": int(sum(ds.counts.values())),
             "status_counts": ds.counts,
             "samples_used": len(lam),
+            "target": config.target,
+            "distribution": "+".join(p["distribution"] for p in parts),
             "split": {"train": len(split.train), "val": len(split.val), "test": len(split.test)},
             "generation_command": manifest.get("command"),
             "sampler_version": manifest.get("sampler_version"),
@@ -459,7 +528,10 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m margin_rl.stability.training", description=__doc__.split("\n\n")[0]
     )
     parser.add_argument(
-        "--data", required=True, help="dataset directory (python -m margin_rl.stability.dataset generate)"
+        "--data",
+        required=True,
+        action="append",
+        help="dataset directory (python -m margin_rl.stability.dataset generate); repeat to mix datasets",
     )
     parser.add_argument("--out", required=True, help="output path without suffix: writes <out>.npz and <out>.json")
     defaults = TrainConfig()
@@ -484,6 +556,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--proxy-weight", type=float, default=defaults.proxy_weight, help="physics: output = net + w x proxy"
     )
+    parser.add_argument(
+        "--target", choices=TARGETS, default=defaults.target, help="analytic: m_a on ok states; extended: m_x on all"
+    )
+    parser.add_argument("--device", default=defaults.device, help="torch device of the fit, e.g. cuda")
+    parser.add_argument("--max-seconds", type=float, default=None, help="wall-time budget of the fit [s]")
     parser.add_argument("--seed", type=int, default=defaults.seed)
     parser.add_argument("--max-samples", type=int, default=None)
     parser.add_argument("--grad-check-states", type=int, default=defaults.grad_check_states)
@@ -512,6 +589,9 @@ def main(argv: list[str] | None = None) -> int:
         mirror=args.mirror,
         architecture=args.architecture,
         proxy_weight=args.proxy_weight,
+        target=args.target,
+        device=args.device,
+        max_seconds=args.max_seconds,
     )
     command = "python -m margin_rl.stability.training " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     card = train(args.data, args.out, config, args.logdir, command, progress=not args.quiet)

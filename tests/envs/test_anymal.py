@@ -334,3 +334,19 @@ def test_info_lambda_is_the_state_the_margin_saw(vector: bool, toy_weights: str)
         np.testing.assert_allclose(np.clip(model(lam), -0.5, 0.5), np.atleast_1d(info["margin"]), atol=1e-12)
         np.testing.assert_array_equal(state.to_lambda(), lam)  # to_lambda(from_lambda(lam)) == lam
     env.close()
+
+
+def test_analytic_kind_gives_a_flight_phase_the_extended_margin_not_the_floor() -> None:
+    """In the air there is no Feasible Region; the analytic kind rates the state with m_x (stability.extended)."""
+    from margin_rl.envs.core import MARGIN_CLIP
+    from margin_rl.stability.extended import extended_margin
+
+    env = gym.make("margin_rl/AnymalC-v0", margin="analytic", randomization=NO_NOISE)
+    env.reset(seed=0)
+    core = env.unwrapped.core
+    core._qpos[0, 2] += 1.0  # 1 m up: no foot in contact for the next few steps
+    info = env.step(np.zeros(12))[4]
+    assert info["contacts"].tolist() == [0.0, 0.0, 0.0, 0.0]
+    expected = extended_margin(core.robot, core.last_lambda[0])
+    assert info["margin"] == pytest.approx(expected)
+    assert MARGIN_CLIP[0] < info["margin"] < 0.0

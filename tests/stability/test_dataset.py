@@ -181,3 +181,40 @@ def test_rollouts_distribution_names_its_states_file(tmp_path: Path) -> None:
         replace(SPEC, distribution="rollouts")
     with pytest.raises(DatasetError, match="needs --states"):
         replace(SPEC, states=str(states))
+
+
+def test_shards_carry_the_extended_margin_and_load_by_target(tmp_path: Path) -> None:
+    from margin_rl.stability.extended import SOURCES, extended_margin_batch
+
+    out = tmp_path / "ds"
+    generate(SPEC, out, workers=1, progress=False)
+    with np.load(shard_path(out, 0)) as data:
+        lam, status, extended, source = data["lam"], data["status"], data["extended"], data["source"]
+        margin, load_fraction = data["margin"], data["load_fraction"]
+    ok = status == STATUSES.index("ok")
+    # m_x is m_a on ok states and has a value on every state with a stance (Table I has no unreachable ones here).
+    np.testing.assert_array_equal(extended[ok], margin[ok])
+    assert np.isfinite(extended).all() and (source[~ok] != SOURCES.index("analytic")).all()
+    assert (load_fraction[ok] == 1.0).all()
+    # The same labels as the module computes on the stored (float32) states.
+    again = extended_margin_batch(load_robot("anymal_b"), lam[:8].astype(np.float64))
+    np.testing.assert_allclose(again.margin, extended[:8], atol=2e-3)
+    analytic, both = load_dataset(out), load_dataset(out, target="extended")
+    assert len(analytic.lam) == analytic.counts["ok"] and len(both.lam) == 50
+    assert np.isnan(both.analytic).sum() == 50 - analytic.counts["ok"]
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["format_version"] == 2 and manifest["extended_margin"]["bisection_steps"] >= 1
+    with pytest.raises(DatasetError, match="target must be one of"):
+        load_dataset(out, target="both")
+
+
+def test_a_format_1_dataset_cannot_train_the_extended_target(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    generate(SPEC, out, workers=1, progress=False)
+    for path in shards(out):  # strip the m_x columns, as a dataset labelled before them has none
+        with np.load(path) as data:
+            kept = {k: data[k] for k in ("lam", "margin", "status", "n_lps", "seconds")}
+        np.savez(path, **kept)
+    assert len(load_dataset(out).lam) > 0
+    with pytest.raises(DatasetError, match="format-1 dataset"):
+        load_dataset(out, target="extended")

@@ -478,3 +478,44 @@ def _flat_normals() -> np.ndarray:
     lam = np.zeros(47)
     lam[LAMBDA_SLICES["normals"].start + 2 :: 3] = 1.0
     return lam
+
+
+def test_extended_target_trains_on_every_state_and_mixes_datasets(tmp_path: Path) -> None:
+    """Two datasets of one robot are concatenated; the card names both and judges the net on m_a too."""
+    from margin_rl.stability.analytic import AnalyticSettings
+    from margin_rl.stability.dataset import DatasetError, DatasetSpec, generate
+    from margin_rl.stability.training import TrainConfig, train
+
+    first, second, other = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    generate(DatasetSpec("anymal_b", 80, 40, 0, AnalyticSettings()), first, workers=1, progress=False)
+    generate(DatasetSpec("anymal_b", 40, 40, 1, AnalyticSettings()), second, workers=1, progress=False)
+    config = TrainConfig(epochs=2, grad_check_states=0, protocol_states=0, target="extended", max_seconds=60.0)
+    card = train([first, second], tmp_path / "w", config, progress=False)
+    assert card["dataset"]["target"] == "extended" and card["dataset"]["samples_used"] == 120
+    assert [p["path"] for p in card["dataset"]["parts"]] == [str(first), str(second)]
+    assert card["test_metrics"]["on_analytic"]["n"] <= card["test_metrics"]["n"]
+    generate(DatasetSpec("anymal_c", 40, 40, 0, AnalyticSettings()), other, workers=1, progress=False)
+    with pytest.raises(DatasetError, match="one robot"):
+        train([first, other], tmp_path / "x", config, progress=False)
+
+
+def test_time_budget_stops_the_fit() -> None:
+    from margin_rl.stability.training import TrainConfig, build_model, fit
+
+    rng = np.random.default_rng(0)
+    lam, margin = rng.normal(size=(600, 47)), rng.normal(size=600)
+    config = TrainConfig(epochs=50, batch_size=64, patience=100, max_seconds=1e-6, grad_check_states=0)
+    model = build_model(lam[:500], margin[:500])
+    summary = fit(model, lam[:500], margin[:500], lam[500:], margin[500:], config, progress=False)
+    assert summary["epochs_run"] == 1 and summary["stopped_by_time_budget"]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [("target", "relaxed", "target must be one of"), ("max_seconds", 0.0, "max_seconds must be > 0")],
+)
+def test_bad_target_and_budget_are_refused(field: str, value: object, message: str) -> None:
+    from margin_rl.stability.training import TrainConfig, check_config
+
+    with pytest.raises(ValueError, match=message):
+        check_config(TrainConfig(**{field: value}))

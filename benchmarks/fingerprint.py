@@ -155,25 +155,8 @@ def cli_fingerprints(work: Path) -> dict[str, str]:
         __import__(module)
     except ImportError:
         module = "margin_rl.dataset"
-    _run(
-        [
-            "-m",
-            module,
-            "generate",
-            "--robot",
-            "anymal_b",
-            "--n",
-            "400",
-            "--shard-size",
-            "200",
-            "--workers",
-            "1",
-            "--out",
-            str(data),
-            "--quiet",
-        ],
-        work,
-    )
+    _run(["-m", module, "generate", "--robot", "anymal_b", "--n", "400", "--shard-size", "200", "--workers", "1",
+          "--out", str(data), "--quiet"], work)
     shards = sorted(p for p in data.iterdir() if p.suffix == ".npz")
     for shard in shards:
         with np.load(shard) as z:
@@ -181,31 +164,9 @@ def cli_fingerprints(work: Path) -> dict[str, str]:
             out[f"dataset/{shard.name}"] = digest(*(z[k] for k in sorted(z.files) if k != "seconds"))
     for backend, extra in (("rsl", []), ("sb3", ["--ppo-option", "n_steps=64"])):
         run_dir = work / f"train_{backend}"
-        _run(
-            [
-                "-m",
-                "margin_rl.train.train",
-                "--env",
-                "margin_rl/AnymalB-v0",
-                "--backend",
-                backend,
-                "--seed",
-                "1",
-                "--num-envs",
-                "8",
-                "--total-steps",
-                "1024",
-                "--margin-weight",
-                "0.2",
-                "--env-option",
-                "alive_bonus=0",
-                "--run-dir",
-                str(run_dir),
-                "--no-progress",
-                *extra,
-            ],
-            work,
-        )
+        _run(["-m", "margin_rl.train.train", "--env", "margin_rl/AnymalB-v0", "--backend", backend, "--seed", "1",
+              "--num-envs", "8", "--total-steps", "1024", "--margin-weight", "0.2", "--env-option", "alive_bonus=0",
+              "--run-dir", str(run_dir), "--no-progress", *extra], work)
         import torch
 
         policy = torch.jit.load(str(run_dir / "policy_torchscript.pt"))

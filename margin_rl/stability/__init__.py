@@ -17,10 +17,12 @@ Robot layer (lambda in R^47, eq. 4)::
     sampling         sample_states(robot, n, seed, table): the Table I sampler; LOCOMOTION, Table I widened to
                      the states walking policies visit (DISTRIBUTIONS by name)
     analytic         analytic_margin(robot, lam): lambda -> IK -> region -> ICP -> m_a (and a batch version)
+    extended         extended_margin(robot, lam): m_x, m_a continued to states without a Feasible Region (relaxed
+                     dynamic load with a penalty; the ICP's distance to the support hull)
     contact_batch    the contact problems of many states at once (batched IK, wrenches): the labelling path
     region_batch     the region's conic programs on one fixed sparsity structure per stance, updated per state
     fwp              fwp_feasibility(robot, lam): the feasible-wrench-polytope factor s (seed 004)
-    dataset          Table I states labelled with m_a, in resumable shards (python -m margin_rl.stability.dataset)
+    dataset          states labelled with m_a and m_x, in resumable shards (python -m margin_rl.stability.dataset)
     mlp_weights      the learned margin's architecture, weights and their files (no torch)
     features         cheap physics features of lambda (ICP, load-shifted support polygon, friction terms), exact
                      Jacobians, numpy and torch: the inputs of the "physics" architecture
@@ -38,6 +40,7 @@ from margin_rl.stability.analytic import (
     analytic_margin_batch,
 )
 from margin_rl.stability.contact import CentroidalLoad, ContactSet, LegLimits
+from margin_rl.stability.extended import ExtendedMargins, extended_margin, extended_margin_batch
 from margin_rl.stability.fwp import FWPFeasibility, feasible_wrench_polytope, fwp_feasibility
 from margin_rl.stability.icp import capture_point, stability_margin
 from margin_rl.stability.lambda_state import (
@@ -63,6 +66,7 @@ __all__ = [
     "BatchMargins",
     "CentroidalLoad",
     "ContactSet",
+    "ExtendedMargins",
     "FWPFeasibility",
     "FeasibleRegion",
     "LearnedMargin",
@@ -73,6 +77,8 @@ __all__ = [
     "analytic_margin",
     "analytic_margin_batch",
     "capture_point",
+    "extended_margin",
+    "extended_margin_batch",
     "feasible_region",
     "feasible_wrench_polytope",
     "from_lambda",

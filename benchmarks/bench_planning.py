@@ -19,7 +19,15 @@ import time
 
 import numpy as np
 
-from margin_rl.planning import WALK, BaseState, PlannerConfig, TrajectoryProblem, get_scenario, planning_robot
+from margin_rl.planning import (
+    WALK,
+    BaseState,
+    PlannerConfig,
+    TrajectoryProblem,
+    get_scenario,
+    planning_robot,
+    planning_weights,
+)
 from margin_rl.robot import load_robot
 from margin_rl.stability import LearnedMargin
 
@@ -35,7 +43,7 @@ def main() -> None:
 
     robot = load_robot(args.robot)
     model = planning_robot(robot)
-    margin = LearnedMargin.load(args.robot)
+    margin = LearnedMargin.load(planning_weights(args.robot))
     hm = get_scenario(args.scenario).height_map
     h = model.nominal_com_height
     initial = BaseState([0.0, 0.0, h], np.zeros(3), np.zeros(3), np.zeros(3))

@@ -3,7 +3,7 @@
 A layer above :mod:`margin_rl.stability` (nothing below depends on it)::
 
     model = planning_robot(load_robot("anymal_c"))              # planning pose, range of motion
-    margin = LearnedMargin.load("anymal_c")
+    margin = LearnedMargin.load("anymal_c_table_i")  # planning_weights("anymal_c")
     scenario = get_scenario("side_step")                         # flat, side_step, course, env_rough
     result = run_course(model, scenario, WALK, PlannerConfig(), margin)   # replan at 1 Hz, T = 3 s
     check = check_course(result, model.robot, margin)            # analytic margin, IK reachability
@@ -21,6 +21,7 @@ benchmark), ``problem`` (eq. 9 and IPOPT), ``receding``, ``checks``, ``figures``
 
 from margin_rl.planning.checks import CourseCheck, check_course, lateral_com_offset, plan_lambda
 from margin_rl.planning.gait import GAITS, TROT, WALK, Gait, contact_flags, get_gait
+from margin_rl.planning.mlp import planning_weights
 from margin_rl.planning.problem import BaseState, Plan, PlannerConfig, TrajectoryProblem
 from margin_rl.planning.receding import CourseResult, run_course
 from margin_rl.planning.robot_model import PlanningRobot, planning_robot, range_of_motion_reachable
@@ -50,6 +51,7 @@ __all__ = [
     "lateral_com_offset",
     "plan_lambda",
     "planning_robot",
+    "planning_weights",
     "range_of_motion_reachable",
     "run_course",
 ]

@@ -20,6 +20,7 @@ import numpy as np
 
 from margin_rl.planning.checks import CourseCheck, check_course, lateral_com_offset
 from margin_rl.planning.gait import get_gait
+from margin_rl.planning.mlp import planning_weights
 from margin_rl.planning.problem import PlannerConfig
 from margin_rl.planning.receding import CourseResult, run_course
 from margin_rl.planning.robot_model import planning_robot
@@ -52,7 +53,7 @@ def evaluate_scenario(
     """
     robot = load_robot(robot_name)
     model = planning_robot(robot)
-    margin_model = LearnedMargin.load(robot_name)
+    margin_model = LearnedMargin.load(planning_weights(robot_name))
     scenario = get_scenario(scenario_name)
     gait = get_gait(gait_name)
     config = PlannerConfig() if config is None else config

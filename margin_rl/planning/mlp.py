@@ -22,6 +22,17 @@ import numpy as np
 from margin_rl.stability import LAMBDA_DIM, LearnedMargin
 
 
+def planning_weights(robot_name: str) -> str:
+    """The bundled learned-margin weights the planner uses for ``robot_name``: the Table I network.
+
+    The planner's trajectories are slow, statically stable walks: states of the kind Table I samples. The
+    default network (learned margin v2) is trained for the states RL policies visit and is about half as
+    accurate on Table I states (8.1-8.5 vs 3.7-4.1 cm RMSE, the two cards' ``paper_protocol``), so the
+    planner keeps the network it was developed and measured with.
+    """
+    return f"{robot_name}_table_i"
+
+
 def margin_function(model: LearnedMargin, n_columns: int = 1):  # -> casadi.Function
     """``m(lam) -> margin``: lam (47, n_columns) -> (1, n_columns) [m], one column per state.
 

@@ -8,7 +8,9 @@ module (:mod:`~margin_rl.stability.margin_mlp`) use, so that neither imports the
   :mod:`~margin_rl.stability.features`], plus ``proxy_weight`` times the analytic proxy) and
   :class:`MarginWeights` (the parameters in plain numpy, validated against the architecture and the lambda
   layout);
-* the bundled files: :func:`weights_dir`, :func:`bundled_robots`, :func:`weights_path`;
+* the bundled files: :func:`weights_dir`, :func:`bundled_robots`, :func:`bundled_weights`, :func:`weights_path`
+  (``"<robot>"``: the default network, trained on the states walking policies visit and on Table I (learned
+  margin v2); ``"<robot>_table_i"``: the network trained on seed 000's Table I alone, the v1 default);
 * :func:`save_weights` (``<path>.npz`` and its model card ``<path>.json``), :func:`layout_signature`,
   :data:`WEIGHTS_FORMAT` and :class:`WeightsError`.
 """
@@ -36,6 +38,7 @@ __all__ = [
     "WeightsError",
     "architecture_widths",
     "bundled_robots",
+    "bundled_weights",
     "layout_signature",
     "save_weights",
     "weights_dir",
@@ -81,9 +84,18 @@ def weights_dir() -> Path:
     return Path(str(importlib.resources.files("margin_rl.stability").joinpath("weights")))
 
 
-def bundled_robots() -> tuple[str, ...]:
-    """Robots with bundled learned-margin weights."""
+WEIGHTS_VARIANTS: tuple[str, ...] = ("table_i",)
+"""Suffixes of bundled weights other than a robot's default: ``"<robot>_<variant>"``."""
+
+
+def bundled_weights() -> tuple[str, ...]:
+    """Names of every bundled weights file (``LearnedMargin.load(name)``): robots and ``<robot>_<variant>``."""
     return tuple(sorted(p.stem for p in weights_dir().glob("*.npz")))
+
+
+def bundled_robots() -> tuple[str, ...]:
+    """Robots with bundled (default) learned-margin weights."""
+    return tuple(n for n in bundled_weights() if not n.endswith(tuple(f"_{v}" for v in WEIGHTS_VARIANTS)))
 
 
 def weights_path(robot_or_path: str | Path) -> Path:
@@ -95,8 +107,8 @@ def weights_path(robot_or_path: str | Path) -> Path:
     text = str(robot_or_path)
     if text.endswith(".npz") or "/" in text or Path(text).suffix:
         return Path(text).with_suffix(".npz")
-    if text not in bundled_robots():
-        raise WeightsError(f"no learned margin for robot {text!r}; bundled: {', '.join(bundled_robots()) or 'none'}")
+    if text not in bundled_weights():
+        raise WeightsError(f"no learned margin for robot {text!r}; bundled: {', '.join(bundled_weights()) or 'none'}")
     return weights_dir() / f"{text}.npz"
 
 

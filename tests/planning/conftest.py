@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from margin_rl.planning import WALK, PlannerConfig, TrajectoryProblem, flat_map, planning_robot
+from margin_rl.planning import WALK, PlannerConfig, TrajectoryProblem, flat_map, planning_robot, planning_weights
 from margin_rl.robot import load_robot
 from margin_rl.stability import LearnedMargin
 
@@ -22,7 +22,7 @@ def model_c(robot_c):
 
 @pytest.fixture(scope="session")
 def margin_c():
-    return LearnedMargin.load("anymal_c")
+    return LearnedMargin.load(planning_weights("anymal_c"))
 
 
 @pytest.fixture(scope="session")

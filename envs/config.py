@@ -282,7 +282,10 @@ class EnvConfig:
     # the same bonus: the paper's L + m is negative per step for a trot, and PPO then learns to fall)
     alive_bonus: float = 0.0
     logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
-    acceleration_filter: float = 0.0  # EMA factor on the finite-difference accelerations (0: none)
+    # EMA factor on the finite-difference accelerations in lambda (0: none). 0.5 halves the touchdown-impact
+    # noise that otherwise drives the margin term (learned margin v2, item 2: BENCHMARKS "Accelerations in
+    # lambda"); runs recorded before v2 keep their 0.0 in their config.json.
+    acceleration_filter: float = 0.5
     privileged_observations: bool = False  # add the critic group (terrain heights, friction, margin)
     command: CommandConfig = field(default_factory=CommandConfig)
     randomization: RandomizationConfig = field(default_factory=RandomizationConfig)

@@ -14,7 +14,7 @@ environments in the same step (their last observation is returned separately).
 3. ``_measure``: the world-frame state (:class:`SimulationState`) from the batch's arrays;
 4. ``_estimate_accelerations``: CoM, base angular and joint accelerations by finite differences over
    the policy step (20 ms: the mean acceleration over the step, exact on average), the first two
-   optionally smoothed by an exponential filter (``EnvConfig.acceleration_filter``, off by default);
+   smoothed by an exponential filter (``EnvConfig.acceleration_filter``, 0.5 by default);
 5. ``_stability``: lambda (seed 000 eq. 4, :mod:`margin_rl.envs.stability_input`) and the margin of the
    configured kind (:mod:`margin_rl.envs.margin_kinds`), clipped to :data:`MARGIN_CLIP` (states the
    kind cannot rate get the lower clip); a push enters lambda as f_ext;
@@ -127,11 +127,18 @@ class SimulationState:
 
 @dataclass(frozen=True)
 class Accelerations:
-    """Finite-difference accelerations over the policy step (world frame; CoM and base possibly filtered)."""
+    """Finite-difference accelerations over the policy step (world frame).
 
-    com: np.ndarray  # (N, 3) [m/s^2]
-    base_angular: np.ndarray  # (N, 3) [rad/s^2]
+    ``com`` and ``base_angular`` are the filtered estimates lambda is built from; ``com_measured`` and
+    ``base_angular_measured`` the unfiltered differences the info reports (what the comparison's base
+    acceleration metrics measure, whatever the filter).
+    """
+
+    com: np.ndarray  # (N, 3) [m/s^2], EMA-filtered (EnvConfig.acceleration_filter)
+    base_angular: np.ndarray  # (N, 3) [rad/s^2], EMA-filtered
     joints: np.ndarray  # (N, 12) [rad/s^2], unfiltered
+    com_measured: np.ndarray  # (N, 3) [m/s^2], unfiltered
+    base_angular_measured: np.ndarray  # (N, 3) [rad/s^2], unfiltered
 
 
 @dataclass(frozen=True)
@@ -207,6 +214,8 @@ class AnymalCore:
         self._prev_joint_vel = np.zeros((n, 12))
         self._com_acc = np.zeros((n, 3))
         self._ang_acc = np.zeros((n, 3))
+        self._com_acc_measured = np.zeros((n, 3))
+        self._ang_acc_measured = np.zeros((n, 3))
         self._air_time = np.zeros((n, 4))
         self._prev_contacts = np.ones((n, 4), dtype=bool)
         self._push_steps_left = np.zeros(n, dtype=np.int64)
@@ -262,6 +271,8 @@ class AnymalCore:
         self._prev_joint_vel[ids] = state.joint_vel
         self._com_acc[ids] = 0.0
         self._ang_acc[ids] = 0.0
+        self._com_acc_measured[ids] = 0.0
+        self._ang_acc_measured[ids] = 0.0
         self._air_time[ids] = 0.0
         self._prev_contacts[ids] = True
         self._push_steps_left[ids] = 0
@@ -381,7 +392,8 @@ class AnymalCore:
         joint_acc = (state.joint_vel - self._prev_joint_vel) / self.dt
         self._prev_com_vel, self._prev_ang_vel = state.com_vel.copy(), state.ang_vel_world.copy()
         self._prev_joint_vel = state.joint_vel.copy()
-        return Accelerations(self._com_acc, self._ang_acc, joint_acc)
+        self._com_acc_measured, self._ang_acc_measured = com_acc, ang_acc
+        return Accelerations(self._com_acc, self._ang_acc, joint_acc, com_acc, ang_acc)
 
     def _stability(self, state: SimulationState, acc: Accelerations) -> tuple[StabilityState, np.ndarray]:
         """lambda's fields and the clipped margin (N,), one evaluation for the batch (lambda: :attr:`last_lambda`)."""
@@ -444,8 +456,9 @@ class AnymalCore:
         return {
             **{f"reward_{k}": v for k, v in terms.items()},
             "margin": margin,
-            "base_lin_acc": np.einsum("nji,nj->ni", R, self._com_acc),  # CoM acceleration, base frame
-            "base_ang_acc": np.einsum("nji,nj->ni", R, self._ang_acc),  # base frame
+            # Unfiltered: the robot's accelerations, the comparison's metrics (lambda has the filtered ones).
+            "base_lin_acc": np.einsum("nji,nj->ni", R, self._com_acc_measured),  # CoM acceleration, base frame
+            "base_ang_acc": np.einsum("nji,nj->ni", R, self._ang_acc_measured),  # base frame
             "base_lin_vel": values["base_lin_vel"],
             "velocity_error": np.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
             "contacts": state.contacts.astype(np.float64),

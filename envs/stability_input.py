@@ -5,7 +5,11 @@ base x axis projected on the ground). lambda holds e_g, the third row of the bas
 and every other vector in H, the feet relative to the CoM. Accelerations: the environment passes the
 CoM acceleration and the base angular acceleration as finite differences of the CoM velocity (subtree
 sensor) and of the base angular velocity (world frame) over the 20 ms policy step, i.e. the mean
-acceleration over the step (optionally smoothed by ``EnvConfig.acceleration_filter``).
+acceleration over the step, smoothed by the EMA a_k = f a_(k-1) + (1 - f) a_fd with f =
+``EnvConfig.acceleration_filter`` (0.5 by default). Why this estimator (BENCHMARKS "Accelerations in lambda",
+one trot, the three side by side): the finite difference *is* the mean of MuJoCo's substep accelerations, the
+instantaneous value is dominated by touchdown impacts (1.4-1.5x the noise), and the filter halves the
+step-to-step noise, so impact spikes do not drive the reward, at a lag of about one policy step.
 """
 
 from __future__ import annotations

@@ -350,3 +350,27 @@ def test_analytic_kind_gives_a_flight_phase_the_extended_margin_not_the_floor() 
     expected = extended_margin(core.robot, core.last_lambda[0])
     assert info["margin"] == pytest.approx(expected)
     assert MARGIN_CLIP[0] < info["margin"] < 0.0
+
+
+def test_acceleration_filter_smooths_lambda_not_the_measured_accelerations(toy_weights: str) -> None:
+    """lambda's CoM acceleration is the EMA of the finite difference; the info reports the difference itself."""
+    from margin_rl.stability.lambda_state import LAMBDA_SLICES
+
+    envs = [
+        gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE, acceleration_filter=f)
+        for f in (0.0, 0.5)
+    ]
+    for env in envs:
+        env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    filtered = np.zeros(3)
+    for _ in range(6):
+        action = rng.uniform(-1, 1, 12)
+        raw_info, ema_info = (env.step(action)[4] for env in envs)
+        np.testing.assert_allclose(ema_info["base_lin_acc"], raw_info["base_lin_acc"], atol=1e-12)
+        # The EMA runs in the world frame; lambda holds it in the heading frame H (same z, a yaw apart).
+        raw_acc = envs[0].unwrapped.core.last_lambda[0, LAMBDA_SLICES["com_acc"]]
+        ema_acc = envs[1].unwrapped.core.last_lambda[0, LAMBDA_SLICES["com_acc"]]
+        filtered = 0.5 * filtered + 0.5 * raw_acc[2]
+        assert ema_acc[2] == pytest.approx(filtered, abs=1e-9)
+    assert not np.allclose(ema_acc, raw_acc)

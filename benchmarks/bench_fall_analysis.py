@@ -10,19 +10,23 @@ training run with the learned margin the policies were trained with (the bundle'
 weight), so the per-term rewards are the ones the policy was trained on. Episodes run to their first termination
 or the time limit (no autoreset). Measured, per variant (mean ± std over the policies, i.e. training seeds):
 
-* falls: fraction of episodes, time of the fall, which termination fired (base contact, thigh contact, base
-  below the height bound, tilt beyond the bound, diverged simulation; several can fire at once);
+* falls: fraction of episodes (overall, per evaluation seed, before and after the first 2 s), time of the fall,
+  which termination fired (base contact, thigh contact, base below the height bound, tilt beyond the bound,
+  diverged simulation; several can fire at once), which thigh and which of its geoms touched the floor;
 * gait before falls: each foot's contact share and the number of feet in contact over the last
   ``--contact-window`` s, against the steps of non-falling episodes after the first second;
-* trends: base height, tilt, base-frame velocities and angular rates, learned margin at fixed times before the
-  fall;
+* trends: base height, lowest knee height, stance width, tilt, base-frame velocities and angular rates, feet in
+  contact and learned margin at fixed times before the fall, against their mean and 5th/95th percentiles in the
+  steady gait;
 * reward: per-step mean of every weighted term (``info["reward_<term>"]``) and of the total, the margin term's
   share of the return, and how often the margin term sat at its floor (margin clipped at -0.5 m), in falling
   and non-falling episodes and in the last ``--window`` s before falls;
 * margins: on a subsample of the visited lambdas (every ``--every``-th step, plus every step of the last
   ``--window`` s before each fall) the learned margin (unclipped) against the extended margin m_x and the
   analytic margin m_a (:func:`margin_rl.stability.extended.extended_margin_batch`): how often the learned
-  margin is positive where m_x is negative, or where m_a is negative or undefined (no Feasible Region).
+  margin is positive where m_x is negative, or where m_a is negative or undefined (no Feasible Region);
+* posture probe: on ``--probe-states`` steady states per policy, the change of the learned margin and of m_x when
+  lambda's CoM is put 5 cm lower over the same feet, or the stance 5 cm wider.
 
 Prints Markdown tables; ``--json`` writes every number, ``--figure`` a summary figure.
 """
@@ -41,6 +45,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from margin_rl.envs.core import MARGIN_CLIP, AnymalCore, SimulationState
@@ -66,6 +71,7 @@ PROBE_SHIFT_M = 0.05  # posture probe: CoM this much lower, or stance this much 
 LEFT_LEGS = np.array([leg.startswith("L") for leg in LEGS])
 SCATTER_POINTS = 4000  # states per variant drawn away from falls in the learned-vs-m_x panel
 LABELLED = "labelled states"
+PATTERNS = "most common patterns (pooled share)"
 UNSTABLE_STATUSES = (STATUSES.index("infeasible"), STATUSES.index("no_contact"))  # no Feasible Region
 
 
@@ -86,6 +92,7 @@ class Episodes:
     fell: np.ndarray  # (N,) terminated by a fall (the card's "fell": terminated and not diverged)
     causes: np.ndarray  # (N, len(CAUSES)) flags at the ending step (all False for time-limit episodes)
     thighs: np.ndarray  # (N, 4) thigh contacts at the ending step
+    thigh_geoms: Counter[str]  # thigh geom name -> falls that ended with it on the floor
     reward: np.ndarray  # (T, N)
     terms: dict[str, np.ndarray]  # weighted reward terms (T, N)
     margin_env: np.ndarray  # (T, N) the margin the reward used (learned, clipped to MARGIN_CLIP)
@@ -104,6 +111,7 @@ class Episodes:
 
     @property
     def name(self) -> str:
+        """'<variant> s<training seed>', for progress lines."""
         return f"{self.variant} s{self.policy_seed}"
 
     def alive(self) -> np.ndarray:
@@ -141,6 +149,29 @@ def termination_flags(core: AnymalCore, state: SimulationState, diverged: np.nda
     )
 
 
+def thigh_geom_name(model: mujoco.MjModel, geom: int) -> str:
+    """A thigh geom by its shape and its position along the thigh (the MJCF leaves them unnamed): on ANYmal the
+    thigh runs from the hip (z = 0) to the knee (z = -0.25 m) in its body frame."""
+    shape = mujoco.mjtGeom(model.geom_type[geom]).name.removeprefix("mjGEOM_").lower()
+    return f"{shape} at z = {model.geom_pos[geom, 2]:+.3f} m"
+
+
+def floor_thigh_geoms(core: AnymalCore, env: int) -> set[str]:
+    """Names (:func:`thigh_geom_name`) of the thigh geoms of environment ``env`` touching the floor now, each once
+    (MuJoCo may report several contact points for one geom)."""
+    model, data = core.model, core.render_data(env)
+    thighs = {model.body(f"{leg}_THIGH").id for leg in core.robot.leg_names}
+    floor = model.geom("floor").id
+    names = set()
+    for contact in data.contact[: data.ncon]:
+        pair = (int(contact.geom1), int(contact.geom2))
+        if floor in pair:
+            other = pair[1] if pair[0] == floor else pair[0]
+            if model.geom_bodyid[other] in thighs:
+                names.add(thigh_geom_name(model, other))
+    return names
+
+
 def roll_out(bundle: Bundle, run: BundledRun, envs: int, seed: int, velocity: float) -> Episodes:
     """``envs`` deterministic episodes of one policy from evaluation seed ``seed``, each to its first end."""
     policy = load_policy(run.policy)
@@ -149,7 +180,8 @@ def roll_out(bundle: Bundle, run: BundledRun, envs: int, seed: int, velocity: fl
     core = AnymalCore(evaluation_config(base, velocity), num_envs=envs, seed=seed, autoreset=False)
     core.reset()
     obs = core.observe_all()
-    # Thigh contact ends most falls (measured): the knee, at the thigh's lower end, is its lowest part.
+    # Thigh contact ends most falls (measured below); the knees' height says how close the thighs' lower ends are
+    # to the floor.
     body_positions = core.batch.bind("xpos")
     knees = np.array([core.model.body(f"{leg}_SHANK").id for leg in core.robot.leg_names])
     steps = core.max_episode_steps
@@ -157,6 +189,7 @@ def roll_out(bundle: Bundle, run: BundledRun, envs: int, seed: int, velocity: fl
     fell = np.zeros(envs, dtype=bool)
     causes = np.zeros((envs, len(CAUSES)), dtype=bool)
     thighs = np.zeros((envs, 4), dtype=bool)
+    thigh_geoms: Counter[str] = Counter()
     rows: dict[str, list[np.ndarray]] = {}
     running = np.ones(envs, dtype=bool)
     with torch_threads(1):  # one policy thread: MuJoCo's pool already uses the cores
@@ -189,6 +222,8 @@ def roll_out(bundle: Bundle, run: BundledRun, envs: int, seed: int, velocity: fl
             flags = termination_flags(core, state, diverged)
             causes[ended & out.terminated] = flags[ended & out.terminated]
             thighs[ended & out.terminated] = state.thigh_contacts[ended & out.terminated]
+            for env in np.flatnonzero(ended & out.terminated & state.thigh_contacts.any(axis=1)):
+                thigh_geoms.update(floor_thigh_geoms(core, int(env)))
             running &= ~ended
             obs = out.observation
     arrays = {k: np.stack(v) for k, v in rows.items()}
@@ -203,6 +238,7 @@ def roll_out(bundle: Bundle, run: BundledRun, envs: int, seed: int, velocity: fl
         fell=fell,
         causes=causes,
         thighs=thighs,
+        thigh_geoms=thigh_geoms,
         reward=arrays.pop("reward"),
         terms={k.removeprefix("reward_"): arrays.pop(k) for k in list(arrays) if k.startswith("reward_")},
         margin_env=arrays.pop("margin_env"),
@@ -235,6 +271,7 @@ def join(parts: Sequence[Episodes]) -> Episodes:
         fell=cat("fell", 0),
         causes=cat("causes", 0),
         thighs=cat("thighs", 0),
+        thigh_geoms=sum((p.thigh_geoms for p in parts), Counter()),
         reward=cat("reward", 1),
         terms={k: np.concatenate([p.terms[k] for p in parts], axis=1) for k in first.terms},
         margin_env=cat("margin_env", 1),
@@ -394,6 +431,7 @@ def masked_percentile(values: np.ndarray, mask: np.ndarray, q: float) -> float:
 
 
 def mean_at_fall(episodes: Episodes, values: np.ndarray, seconds_before: float) -> float:
+    """Mean over the falls of :func:`at_fall` (the falls too early to look that far back left out)."""
     picked = at_fall(episodes, values, seconds_before)
     picked = picked[np.isfinite(picked)]
     return float(picked.mean()) if picked.size else math.nan
@@ -458,6 +496,7 @@ def fall_summary(groups: dict[str, list[Episodes]], seeds: Sequence[int]) -> dic
             "fall_time_histogram_s": np.histogram(times, bins=np.arange(0.0, episode_s + 1.0, 1.0))[0].tolist(),
             "cause_combinations": dict(combos.most_common()),
             "thigh_contacts_at_fall": dict(zip(LEGS, thighs.astype(int).tolist(), strict=True)),
+            "thigh_geoms_on_floor_at_fall": dict(sum((e.thigh_geoms for e in policies), Counter()).most_common()),
         }
     return {
         "fraction": across(groups, fraction(None)),
@@ -471,6 +510,7 @@ def fall_summary(groups: dict[str, list[Episodes]], seeds: Sequence[int]) -> dic
 
 
 def _quantiles(values: np.ndarray) -> dict[str, float]:
+    """Min, quartiles and max of ``values``; empty when there are none."""
     if not len(values):
         return {}
     q = np.percentile(values, [0, 25, 50, 75, 100])
@@ -492,7 +532,7 @@ def gait_summary(groups: dict[str, list[Episodes]], window_s: float) -> dict[str
             entry[f"{k} feet in contact"] = across(
                 groups, lambda e, k=k, w=window: masked_mean((e.contacts.sum(axis=-1) == k).astype(float), w(e))
             )
-        entry["most common patterns (pooled share)"] = {
+        entry[PATTERNS] = {
             variant: pattern_shares(np.concatenate([pattern_codes(e.contacts[window(e)]) for e in policies]), top=6)
             for variant, policies in groups.items()
         }
@@ -660,6 +700,7 @@ def print_table(title: str, rows: dict[str, dict[str, dict[str, Any]]], variants
 
 
 def print_report(report: dict[str, Any], variants: Sequence[str], total: int) -> None:
+    """Every table of the report, one column per variant (``total``: policies per variant)."""
     falls = report["falls"]
     rows = {"fall fraction": falls["fraction"]}
     rows |= {f"fall fraction, eval seed {s}": v for s, v in falls["fraction_per_eval_seed"].items()}
@@ -673,25 +714,31 @@ def print_report(report: dict[str, Any], variants: Sequence[str], total: int) ->
             f"\n{variant}: {pooled['falls']} falls in {pooled['episodes']} episodes; fall time {pooled['fall_time_s']}"
         )
         print(f"  causes {pooled['cause_combinations']}; thighs at fall {pooled['thigh_contacts_at_fall']}")
+        print(f"  thigh geoms on the floor at the fall step: {pooled['thigh_geoms_on_floor_at_fall']}")
         print(f"  fall-time histogram (1 s bins) {pooled['fall_time_histogram_s']}")
         print(f"  falls within the first 1 / 2 / 5 s: {list(pooled['falls_within_first_s'].values())}")
     for window, entry in report["gait"].items():
         if window.startswith("pattern"):
             print(f"\n{window}: {entry}")
             continue
-        patterns = entry.pop("most common patterns (pooled share)")
-        print_table(f"## Gait: {window}", entry, variants, total)
-        entry["most common patterns (pooled share)"] = patterns
-        for variant, shares in patterns.items():
+        shares_only = {k: v for k, v in entry.items() if k != PATTERNS}
+        print_table(f"## Gait: {window}", shares_only, variants, total)
+        for variant, shares in entry[PATTERNS].items():
             print(f"{variant} patterns: " + ", ".join(f"{p} {s:.0%}" for p, s in shares.items()))
     for name, row in report["trends"].items():
-        print_table(f"## Trend: {name}", {k: v for k, v in row.items()}, variants, total)
+        print_table(f"## Trend: {name}", row, variants, total)
     for label, entry in report["rewards"].items():
         print_table(f"## Reward per step: {label}", entry, variants, total)
     for label, entry in report["margins"].items():
         print_table(f"## Learned vs extended/analytic margin: {label}", entry, variants, total)
     for label, entry in report["posture_probe"].items():
         print_table(f"## Posture probe on steady-gait states: {label}", entry, variants, total)
+
+
+def display_path(path: Path) -> str:
+    """``path`` relative to the working directory where it lies inside it (the repository root), else absolute."""
+    resolved = path.resolve()
+    return str(resolved.relative_to(Path.cwd())) if resolved.is_relative_to(Path.cwd()) else str(resolved)
 
 
 def to_json(value: Any) -> Any:
@@ -898,7 +945,7 @@ def main(argv: list[str] | None = None) -> int:
         record = {
             "command": "python " + " ".join([Path(sys.argv[0]).as_posix(), *sys.argv[1:]]),
             "bundle": bundle.name,
-            "learned_margin": str(bundle.margin_weights.relative_to(bundle.path.parent.parent.parent)),
+            "learned_margin": display_path(bundle.margin_weights),
             "learned_margin_sha256": model.card.get("sha256"),
             "settings": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
             "policies": [

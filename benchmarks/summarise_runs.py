@@ -1,0 +1,100 @@
+"""Summarise evaluated training runs into one small JSON and a Markdown table (what is committed of a run).
+
+Usage:
+    python benchmarks/summarise_runs.py runs/v2_sweep/b_mw*_s* --eval eval5000 \
+        --json docs/comparison/v2_sweep_anymal_b.json
+
+Each run directory holds ``config.json`` (``margin_rl.train.train``) and ``<eval>/metrics.json``
+(``python -m margin_rl.train.evaluate RUN/final_model.pt --episodes 64 --seed 5000 --out RUN/<eval>``). Run
+directories are never committed; this keeps, per run, the settings that define it (environment, margin
+weight, seed, steps, weights' sha256, acceleration filter) and the evaluation's per-metric mean and std, then
+groups the runs by margin weight (mean ± std over seeds, and the number of seeds).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+METRICS = (
+    "fell",
+    "velocity_error_mean",
+    "lin_acc_rms",
+    "ang_acc_rms",
+    "stance_width_mean",
+    "margin_mean",
+    "return",
+)
+
+
+def run_summary(run: Path, eval_name: str) -> dict[str, object]:
+    """Settings and evaluated metrics (mean, std over episodes) of one run."""
+    config = json.loads((run / "config.json").read_text())
+    metrics_path = run / eval_name / "metrics.json"
+    if not metrics_path.is_file():
+        raise SystemExit(f"{run}: no {eval_name}/metrics.json; evaluate the run first (see the module docstring)")
+    metrics = json.loads(metrics_path.read_text())
+    env = config.get("env_config", {})
+    progress = json.loads((run / "progress.json").read_text()) if (run / "progress.json").is_file() else {}
+    return {
+        "run": run.name,
+        "env_id": config.get("env_id"),
+        "margin_weight": env.get("margin_weight"),
+        "seed": config.get("seed"),
+        "env_steps": progress.get("env_steps"),
+        "margin_weights": env.get("margin_weights") or f"bundled {env.get('robot')}",
+        "acceleration_filter": env.get("acceleration_filter"),
+        "alive_bonus": env.get("alive_bonus"),
+        "evaluation": {"episodes": metrics.get("episodes"), "seed": metrics.get("seed")},
+        "metrics": {k: metrics["summary"][k] for k in METRICS if k in metrics["summary"]},
+    }
+
+
+def by_weight(runs: list[dict[str, object]]) -> dict[str, dict[str, object]]:
+    """Per margin weight: each metric's mean and std over the runs' (seeds') episode means."""
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for r in runs:
+        groups[str(r["margin_weight"])].append(r)
+    out = {}
+    for weight, members in sorted(groups.items(), key=lambda kv: float(kv[0])):
+        table = {}
+        for metric in METRICS:
+            values = [m["metrics"][metric]["mean"] for m in members if metric in m["metrics"]]
+            values = [v for v in values if v is not None]
+            if values:
+                table[metric] = {"mean": float(np.mean(values)), "std": float(np.std(values)), "n_seeds": len(values)}
+        out[weight] = {"seeds": sorted(m["seed"] for m in members), "metrics": table}
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("runs", nargs="+", type=Path)
+    parser.add_argument("--eval", default="eval5000", help="evaluation folder inside each run")
+    parser.add_argument("--json", type=Path, required=True)
+    args = parser.parse_args()
+    runs = [run_summary(r, args.eval) for r in sorted(args.runs) if (r / "config.json").is_file()]
+    record = {"runs": runs, "by_margin_weight": by_weight(runs)}
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(record, indent=1) + "\n")
+    print("| margin weight | seeds | falls | velocity error [m/s] | lin. acc. RMS [m/s²] | ang. acc. RMS [rad/s²] "
+          "| stance width [m] | learned margin [m] |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|")
+    for weight, group in record["by_margin_weight"].items():
+        m = group["metrics"]
+        cell = lambda name, fmt, m=m: (  # noqa: E731
+            f"{m[name]['mean']:{fmt}} ± {m[name]['std']:{fmt}}" if name in m else "–"
+        )
+        print(
+            f"| {weight} | {', '.join(map(str, group['seeds']))} | {cell('fell', '.3f')} "
+            f"| {cell('velocity_error_mean', '.3f')} | {cell('lin_acc_rms', '.2f')} | {cell('ang_acc_rms', '.1f')} "
+            f"| {cell('stance_width_mean', '.3f')} | {cell('margin_mean', '.3f')} |"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -88,6 +88,11 @@ class DatasetSpec:
     bisection_steps: int = DEFAULT_BISECTION_STEPS  # halvings for alpha* of the extended margin
 
     def __post_init__(self) -> None:
+        kappa, steps = self.load_penalty, self.bisection_steps
+        if not (isinstance(kappa, (int, float)) and np.isfinite(kappa) and kappa >= 0):
+            raise DatasetError(f"load_penalty (kappa of m_x) must be a finite number >= 0 [m], got {kappa!r}")
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+            raise DatasetError(f"bisection_steps must be an integer >= 1, got {steps!r}")
         if self.distribution not in DISTRIBUTION_NAMES:
             raise DatasetError(f"distribution must be one of {list(DISTRIBUTION_NAMES)}, got {self.distribution!r}")
         if (self.distribution == "rollouts") != (self.states is not None):
@@ -111,7 +116,9 @@ class DatasetSpec:
             f"python -m margin_rl.stability.dataset generate --robot {self.robot} --n {self.n} "
             f"--out {shlex.quote(str(out))} --seed {self.seed} --shard-size {self.shard_size} "
             f"--friction {friction_arg} --focus-tol {self.settings.focus_tol} --labelling {self.settings.labelling} "
-            f"--distribution {self.distribution}" + (f" --states {shlex.quote(self.states)}" if self.states else "")
+            f"--distribution {self.distribution}"
+            + (f" --states {shlex.quote(self.states)}" if self.states else "")
+            + f" --load-penalty {self.load_penalty} --bisection-steps {self.bisection_steps}"
         )
 
     def identity(self) -> dict[str, object]:
@@ -397,6 +404,12 @@ def main(argv: list[str] | None = None) -> int:
         "states) or 'rollouts' (around the recorded states of --states)",
     )
     gen.add_argument("--states", default=None, help="'rollouts': npz of recorded lambdas (key 'lam')")
+    gen.add_argument(
+        "--load-penalty", type=float, default=DEFAULT_LOAD_PENALTY, help="kappa of the extended margin m_x [m]"
+    )
+    gen.add_argument(
+        "--bisection-steps", type=int, default=DEFAULT_BISECTION_STEPS, help="halvings for m_x's load fraction"
+    )
     gen.add_argument("--quiet", action="store_true")
     summ = sub.add_parser("summary", help="print the manifest and status counts of a dataset")
     summ.add_argument("path")
@@ -421,6 +434,8 @@ def main(argv: list[str] | None = None) -> int:
         distribution=args.distribution,
         states=args.states,
         states_sha256=sha256_file(args.states) if args.states else None,
+        load_penalty=args.load_penalty,
+        bisection_steps=args.bisection_steps,
     )
     command = "python -m margin_rl.stability.dataset " + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     try:

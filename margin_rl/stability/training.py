@@ -408,7 +408,7 @@ def gradient_check(
 def load_training_data(data: str | Path | Sequence[str | Path], config: TrainConfig) -> tuple[Dataset, list[dict]]:
     """One dataset directory, or several of the same robot and analytic settings concatenated (e.g. Table I
     mixed with rollout states); returns the merged :class:`Dataset` (the first one's manifest) and a
-    record of each part for the model card.
+    record of each part for the model card. ``config.max_samples`` applies to each part.
 
     Raises:
         DatasetError: parts of different robots or analytic settings (names both).
@@ -419,11 +419,13 @@ def load_training_data(data: str | Path | Sequence[str | Path], config: TrainCon
     parts = [load_dataset(p, max_samples=config.max_samples, target=config.target) for p in paths]
     first = parts[0].manifest
     for path, part in zip(paths[1:], parts[1:], strict=True):
-        for key in ("robot", "analytic_settings"):
+        # Labels of different settings measure different things; m_x also depends on its penalty and halvings.
+        keys = ("robot", "analytic_settings") + (("extended_margin",) if config.target == "extended" else ())
+        for key in keys:
             if part.manifest.get(key) != first.get(key):
                 raise DatasetError(
                     f"{path} has {key} {part.manifest.get(key)!r}, {paths[0]} has {first.get(key)!r}: "
-                    "only datasets of one robot and one set of analytic settings can be mixed"
+                    "only datasets of one robot and one set of label settings can be mixed"
                 )
     record = [
         {

@@ -498,6 +498,10 @@ def test_extended_target_trains_on_every_state_and_mixes_datasets(tmp_path: Path
     generate(DatasetSpec("anymal_c", 40, 40, 0, AnalyticSettings()), other, workers=1, progress=False)
     with pytest.raises(DatasetError, match="one robot"):
         train([first, other], tmp_path / "x", config, progress=False)
+    kappa = tmp_path / "kappa"  # m_x with another load penalty is another quantity
+    generate(DatasetSpec("anymal_b", 40, 40, 2, AnalyticSettings(), load_penalty=0.3), kappa, workers=1, progress=False)
+    with pytest.raises(DatasetError, match="extended_margin"):
+        train([first, kappa], tmp_path / "y", config, progress=False)
 
 
 def test_time_budget_stops_the_fit() -> None:

@@ -214,8 +214,6 @@ class AnymalCore:
         self._prev_joint_vel = np.zeros((n, 12))
         self._com_acc = np.zeros((n, 3))
         self._ang_acc = np.zeros((n, 3))
-        self._com_acc_measured = np.zeros((n, 3))
-        self._ang_acc_measured = np.zeros((n, 3))
         self._air_time = np.zeros((n, 4))
         self._prev_contacts = np.ones((n, 4), dtype=bool)
         self._push_steps_left = np.zeros(n, dtype=np.int64)
@@ -271,8 +269,6 @@ class AnymalCore:
         self._prev_joint_vel[ids] = state.joint_vel
         self._com_acc[ids] = 0.0
         self._ang_acc[ids] = 0.0
-        self._com_acc_measured[ids] = 0.0
-        self._ang_acc_measured[ids] = 0.0
         self._air_time[ids] = 0.0
         self._prev_contacts[ids] = True
         self._push_steps_left[ids] = 0
@@ -327,7 +323,7 @@ class AnymalCore:
         self.last_action = action.copy()
         terminated = self._terminations(state, diverged)
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
-        info = self._info(state, values, terms, margin, stability, terminated, diverged)
+        info = self._info(state, acc, values, terms, margin, stability, terminated, diverged)
         observation = self._observe(values)
         final_observation = observation.copy()
         done = terminated | truncated
@@ -392,7 +388,6 @@ class AnymalCore:
         joint_acc = (state.joint_vel - self._prev_joint_vel) / self.dt
         self._prev_com_vel, self._prev_ang_vel = state.com_vel.copy(), state.ang_vel_world.copy()
         self._prev_joint_vel = state.joint_vel.copy()
-        self._com_acc_measured, self._ang_acc_measured = com_acc, ang_acc
         return Accelerations(self._com_acc, self._ang_acc, joint_acc, com_acc, ang_acc)
 
     def _stability(self, state: SimulationState, acc: Accelerations) -> tuple[StabilityState, np.ndarray]:
@@ -444,6 +439,7 @@ class AnymalCore:
     def _info(
         self,
         state: SimulationState,
+        acc: Accelerations,
         values: dict[str, np.ndarray],
         terms: dict[str, np.ndarray],
         margin: np.ndarray,
@@ -457,8 +453,8 @@ class AnymalCore:
             **{f"reward_{k}": v for k, v in terms.items()},
             "margin": margin,
             # Unfiltered: the robot's accelerations, the comparison's metrics (lambda has the filtered ones).
-            "base_lin_acc": np.einsum("nji,nj->ni", R, self._com_acc_measured),  # CoM acceleration, base frame
-            "base_ang_acc": np.einsum("nji,nj->ni", R, self._ang_acc_measured),  # base frame
+            "base_lin_acc": np.einsum("nji,nj->ni", R, acc.com_measured),  # CoM acceleration, base frame
+            "base_ang_acc": np.einsum("nji,nj->ni", R, acc.base_angular_measured),  # base frame
             "base_lin_vel": values["base_lin_vel"],
             "velocity_error": np.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
             "contacts": state.contacts.astype(np.float64),

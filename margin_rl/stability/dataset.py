@@ -54,7 +54,12 @@ from margin_rl.stability.analytic import (
     AnalyticSettings,
     worker_robot,
 )
-from margin_rl.stability.extended import DEFAULT_BISECTION_STEPS, DEFAULT_LOAD_PENALTY, extended_margin_batch
+from margin_rl.stability.extended import (
+    DEFAULT_BISECTION_STEPS,
+    DEFAULT_LOAD_PENALTY,
+    check_extended_settings,
+    extended_margin_batch,
+)
 from margin_rl.stability.lambda_state import LAMBDA_DIM
 from margin_rl.stability.sampling import DISTRIBUTIONS, SAMPLER_VERSION, sample_around_states, sample_states
 
@@ -88,11 +93,10 @@ class DatasetSpec:
     bisection_steps: int = DEFAULT_BISECTION_STEPS  # halvings for alpha* of the extended margin
 
     def __post_init__(self) -> None:
-        kappa, steps = self.load_penalty, self.bisection_steps
-        if not (isinstance(kappa, (int, float)) and np.isfinite(kappa) and kappa >= 0):
-            raise DatasetError(f"load_penalty (kappa of m_x) must be a finite number >= 0 [m], got {kappa!r}")
-        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-            raise DatasetError(f"bisection_steps must be an integer >= 1, got {steps!r}")
+        try:  # the extended margin's own check, as a DatasetError
+            check_extended_settings(self.load_penalty, self.bisection_steps, penalty_name="load_penalty")
+        except ValueError as exc:
+            raise DatasetError(str(exc)) from None
         if self.distribution not in DISTRIBUTION_NAMES:
             raise DatasetError(f"distribution must be one of {list(DISTRIBUTION_NAMES)}, got {self.distribution!r}")
         if (self.distribution == "rollouts") != (self.states is not None):

@@ -78,17 +78,20 @@ SOURCES: tuple[str, ...] = ("analytic", "relaxed", "support", "none")
 class ExtendedMargins:
     """m_x of many states (:func:`extended_margin_batch`).
 
-    ``margin`` (N,) [m], NaN only where ``source`` is "none"; ``status`` (N,) the analytic status of the
-    state itself (index into :data:`~margin_rl.stability.analytic.STATUSES`); ``load_fraction`` (N,)
-    alpha* (1 for ok, NaN for the fallback and "none"); ``source`` (N,) int8 index into :data:`SOURCES`;
-    ``analytic`` the analytic margins of the states themselves (m_a, programs solved, seconds).
+    ``margin`` (N,) [m], NaN only where ``source`` is "none"; ``load_fraction`` (N,) alpha* (1 for ok, NaN
+    for the fallback and "none"); ``source`` (N,) int8 index into :data:`SOURCES`; ``analytic`` the analytic
+    margins of the states themselves (m_a, status, programs solved, seconds).
     """
 
     margin: np.ndarray
-    status: np.ndarray
     load_fraction: np.ndarray
     source: np.ndarray
     analytic: BatchMargins
+
+    @property
+    def status(self) -> np.ndarray:
+        """(N,) the analytic status of each state itself (index into ``analytic.STATUSES``)."""
+        return self.analytic.status
 
     def counts(self) -> dict[str, int]:
         return {name: int(np.sum(self.source == i)) for i, name in enumerate(SOURCES)}
@@ -129,6 +132,14 @@ def support_fallback(robot: Robot, lam: np.ndarray, penalty: float = DEFAULT_LOA
     return -penalty - support_hull_distance(support[:, :2], icp)
 
 
+def check_extended_settings(penalty: object, bisection_steps: object, penalty_name: str = "penalty") -> None:
+    """A ValueError naming the setting unless kappa is a finite number >= 0 [m] and the halvings an integer >= 1."""
+    if not (isinstance(penalty, (int, float)) and math.isfinite(penalty) and penalty >= 0):
+        raise ValueError(f"{penalty_name} (kappa of m_x) must be a finite number >= 0 [m], got {penalty!r}")
+    if isinstance(bisection_steps, bool) or not isinstance(bisection_steps, int) or bisection_steps < 1:
+        raise ValueError(f"bisection_steps must be an integer >= 1, got {bisection_steps!r}")
+
+
 def extended_margin_batch(
     robot: Robot,
     lams: np.ndarray,
@@ -159,10 +170,7 @@ def extended_margin_batch(
     lams = check_lambda(lams, "lams")
     if lams.ndim != 2:
         raise ValueError(f"lams must have shape (N, {LAMBDA_DIM}), got {lams.shape}")
-    if not (isinstance(penalty, (int, float)) and math.isfinite(penalty) and penalty >= 0):
-        raise ValueError(f"penalty (kappa) must be a finite number >= 0 [m], got {penalty!r}")
-    if isinstance(bisection_steps, bool) or not isinstance(bisection_steps, int) or bisection_steps < 1:
-        raise ValueError(f"bisection_steps must be an integer >= 1, got {bisection_steps!r}")
+    check_extended_settings(penalty, bisection_steps)
     s = AnalyticSettings() if settings is None else settings
     # Only the status of lambda_alpha is read during the bisection: a coarse bracket finds it.
     probe = replace(s, focus_tol=max(s.focus_tol or 0.0, 0.05), outside="euclidean")
@@ -170,14 +178,13 @@ def extended_margin_batch(
     def label(x: np.ndarray, how: AnalyticSettings):
         return analytic_margin_batch(robot.name, x, how, workers=workers, chunk_size=chunk_size)
 
-    n = len(lams)
-    base = label(lams, s)
-    margin = np.where(base.status == STATUSES.index("ok"), base.margin, np.nan)
-    load_fraction = np.where(base.status == STATUSES.index("ok"), 1.0, np.nan)
-    source = np.full(n, SOURCES.index("none"), dtype=np.int8)
-    source[base.status == STATUSES.index("ok")] = SOURCES.index("analytic")
-
     ok, infeasible = STATUSES.index("ok"), STATUSES.index("infeasible")
+    base = label(lams, s)
+    has_region = base.status == ok
+    margin = np.where(has_region, base.margin, np.nan)
+    load_fraction = np.where(has_region, 1.0, np.nan)
+    source = np.where(has_region, SOURCES.index("analytic"), SOURCES.index("none")).astype(np.int8)
+
     candidates = np.flatnonzero(base.status == infeasible)
     relaxed = np.zeros(0, dtype=int)
     if len(candidates):
@@ -200,7 +207,7 @@ def extended_margin_batch(
     for i in np.flatnonzero(no_region & (source == SOURCES.index("none"))).tolist():
         margin[i] = support_fallback(robot, lams[i], penalty)
         source[i] = SOURCES.index("support")
-    return ExtendedMargins(margin=margin, status=base.status, load_fraction=load_fraction, source=source, analytic=base)
+    return ExtendedMargins(margin=margin, load_fraction=load_fraction, source=source, analytic=base)
 
 
 def extended_margin(

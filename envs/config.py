@@ -281,6 +281,12 @@ class EnvConfig:
     # reward per policy step while the episode runs, added to any preset (the comparison gives both variants
     # the same bonus: the paper's L + m is negative per step for a trot, and PPO then learns to fall)
     alive_bonus: float = 0.0
+    # Penalty per metre of knee below knee_clearance_height, summed over the legs (0: off), added to any
+    # preset. The margin rewards a low CoM (the ICP offset v/omega_0 shrinks with height) and a wide stance,
+    # and margin policies learned a crouched gait whose knees touch the floor (BENCHMARKS "Why the margin
+    # policies fall"); the comparison gives both variants the same term.
+    knee_clearance: float = 0.0
+    knee_clearance_height: float = 0.2  # [m] above the terrain under the knee
     logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
     # EMA factor on the finite-difference accelerations in lambda (0: none). 0.5 halves the touchdown-impact
     # noise that otherwise drives the margin term (learned margin v2, item 2: BENCHMARKS "Accelerations in
@@ -316,6 +322,12 @@ class EnvConfig:
         )
         check_optional_path(f"{where}.margin_weights", self.margin_weights)
         check_number(f"{where}.alive_bonus", self.alive_bonus, minimum=0.0, hint="reward per step while alive")
+        check_number(
+            f"{where}.knee_clearance", self.knee_clearance, minimum=0.0, hint="penalty per m of knee too low, 0: off"
+        )
+        check_number(
+            f"{where}.knee_clearance_height", self.knee_clearance_height, minimum=0.0, hint="[m] above the terrain"
+        )
         # L is even (L(x) = L(-x)), so only the gain's size matters; 0 would make the velocity term constant.
         check_number(f"{where}.logistic_gain", self.logistic_gain, minimum=0.0, min_open=True, hint="[s/m]")
         check_number(
@@ -344,4 +356,6 @@ class EnvConfig:
             weights["margin"] = 0.0
         if self.alive_bonus:
             weights["alive"] = weights.get("alive", 0.0) + self.alive_bonus
+        if self.knee_clearance:
+            weights["knee_clearance"] = weights.get("knee_clearance", 0.0) - self.knee_clearance
         return weights

@@ -34,7 +34,7 @@ import mujoco
 import numpy as np
 from mujoco import batch as mj_batch
 
-from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.margin_kinds import make_margin_function
 from margin_rl.envs.observations import (
     FOOT_HEIGHT_OFFSETS,
@@ -114,6 +114,7 @@ class SimulationState:
     contacts: np.ndarray  # (N, 4) bool, foot-terrain contact
     base_contact: np.ndarray  # (N,) bool
     thigh_contacts: np.ndarray  # (N, 4) bool
+    knees: np.ndarray  # (N, 4, 3) knee (KFE joint) positions [m]
 
     def finite(self) -> SimulationState:
         """The same state with every non-finite float replaced by 0 (a diverged step's bookkeeping)."""
@@ -178,11 +179,14 @@ class AnymalCore:
         self._qpos, self._qvel = self.batch.bind("qpos"), self.batch.bind("qvel")
         self._ctrl, self._xfrc = self.batch.bind("ctrl"), self.batch.bind("xfrc_applied")
         self._sensors, self._site_xpos = self.batch.bind("sensordata"), self.batch.bind("site_xpos")
+        self._xpos = self.batch.bind("xpos")
         self._forces = self.batch.bind("actuator_force")
         self._time = self.batch.bind("time")
         m = self.model
         self._base = m.body("base").id
         self._feet = np.array([m.site(f).id for f in self.robot.foot_names])
+        # The shank body's origin is the knee (KFE) joint, the lower end of the thigh whose contact ends an episode.
+        self._knees = np.array([m.body(f"{leg}_SHANK").id for leg in self.robot.leg_names])
         self._sensor = {
             m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i]) for i in range(m.nsensor)
         }
@@ -218,6 +222,7 @@ class AnymalCore:
         self._prev_contacts = np.ones((n, 4), dtype=bool)
         self._push_steps_left = np.zeros(n, dtype=np.int64)
         self._push_force = np.zeros((n, 3))
+        self._push_applied = np.zeros((n, 3))
         self._next_push = np.full(n, np.inf)
         self.observation_size = sum(t.size for t in POLICY_OBSERVATIONS)
         self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
@@ -273,6 +278,7 @@ class AnymalCore:
         self._prev_contacts[ids] = True
         self._push_steps_left[ids] = 0
         self._push_force[ids] = 0.0
+        self._push_applied[ids] = 0.0
         if rnd.push_interval_s is not None:
             self._next_push[ids] = rng.exponential(rnd.push_interval_s / self.dt, size=len(ids))
 
@@ -295,6 +301,7 @@ class AnymalCore:
             contacts=sens[:, self._foot_contact_adr] > 0,
             base_contact=sens[:, self._base_contact_adr] > 0,
             thigh_contacts=sens[:, self._thigh_contact_adr] > 0,
+            knees=self._xpos[ids][:, self._knees],
         )
 
     # ------------------------------------------------------------------ step
@@ -318,6 +325,8 @@ class AnymalCore:
             "touchdown": touchdown,
             "air_time_at_touchdown": air_at_touchdown,
             "thigh_contacts": state.thigh_contacts,
+            "knee_heights": state.knees[..., 2] - self.terrain.height(state.knees[..., :2]),
+            "knee_clearance_height": np.full(self.num_envs, cfg.knee_clearance_height),
         }
         reward, terms = compute_rewards(cfg.reward_weights, values, cfg.logistic_gain)
         self.last_action = action.copy()
@@ -392,7 +401,7 @@ class AnymalCore:
 
     def _stability(self, state: SimulationState, acc: Accelerations) -> tuple[StabilityState, np.ndarray]:
         """lambda's fields and the clipped margin (N,), one evaluation for the batch (lambda: :attr:`last_lambda`)."""
-        ext_force = self._push_force * (self._push_steps_left > 0)[:, None]
+        ext_force = self._push_applied
         stability = stability_state_from_simulation(
             state.base_rot,
             state.com,
@@ -464,11 +473,49 @@ class AnymalCore:
             "diverged": diverged.astype(np.float64),
         }
 
+    def push(self, ids: np.ndarray, force: np.ndarray, duration_s: float, frame: str = "world") -> None:
+        """Push the base of environments ``ids``, from the next step on: a constant force ``force`` (len(ids), 3)
+        [N] at the base origin for ``duration_s`` rounded to whole policy steps (at least one), so the impulse is
+        ``force * steps * dt`` [N s]. ``frame``: "world", or "heading" (the base frame turned by its yaw only, as
+        it is when the push starts: x forwards, y to the left, z up). The push enters lambda as f_ext like the
+        random pushes of :class:`RandomizationConfig`, and replaces a push still running in those environments.
+
+        Raises:
+            ValueError: ``force`` is not (len(ids), 3) and finite, ``ids`` out of range, duration <= 0 or an
+                unknown frame.
+        """
+        ids = np.atleast_1d(np.asarray(ids, dtype=np.int64))
+        force = np.asarray(force, dtype=np.float64)
+        if ids.size and (ids.min() < 0 or ids.max() >= self.num_envs):
+            raise ValueError(f"push ids must lie in [0, {self.num_envs}), got {ids.min()}..{ids.max()}")
+        if force.shape != (len(ids), 3) or not np.all(np.isfinite(force)):
+            raise ValueError(f"push force must be finite with shape (len(ids), 3) = ({len(ids)}, 3), got {force.shape}")
+        if not duration_s > 0:
+            raise ValueError(f"push duration_s must be > 0 [s], got {duration_s}")
+        if frame not in ("world", "heading"):
+            raise ValueError(f"push frame must be 'world' or 'heading', got {frame!r}")
+        if frame == "heading":
+            force = np.einsum("nij,nj->ni", heading_rotation(self._read(ids).base_rot), force)
+        self._push_force[ids] = force
+        self._push_steps_left[ids] = self.push_steps(duration_s)
+
+    def push_steps(self, duration_s: float) -> int:
+        """Policy steps a push of ``duration_s`` lasts (see :meth:`push`)."""
+        return max(1, round(duration_s / self.dt))
+
     def _apply_pushes(self) -> None:
+        """Write the running pushes (random ones of :class:`RandomizationConfig`, and :meth:`push`) to the base."""
         rnd = self.config.randomization
         self._xfrc[:, self._base, :] = 0.0
-        if rnd.push_interval_s is None:
-            return
+        if rnd.push_interval_s is not None:
+            self._start_random_pushes(rnd)
+        active = self._push_steps_left > 0
+        # The force of this step, kept for lambda: the counter below already reads 0 during a push's last step.
+        self._push_applied = np.where(active[:, None], self._push_force, 0.0)
+        self._xfrc[active, self._base, :3] = self._push_force[active]
+        self._push_steps_left = np.maximum(self._push_steps_left - 1, 0)
+
+    def _start_random_pushes(self, rnd: RandomizationConfig) -> None:
         self._next_push -= 1
         start = self._next_push <= 0
         if start.any():
@@ -478,9 +525,6 @@ class AnymalCore:
             )
             self._push_steps_left[start] = max(1, round(rnd.push_duration_s / self.dt))
             self._next_push[start] = self.rng.exponential(rnd.push_interval_s / self.dt, size=int(start.sum()))
-        active = self._push_steps_left > 0
-        self._xfrc[active, self._base, :3] = self._push_force[active]
-        self._push_steps_left = np.maximum(self._push_steps_left - 1, 0)
 
     # ------------------------------------------------------------------ observations
     def _observe(self, values: dict[str, np.ndarray]) -> np.ndarray:

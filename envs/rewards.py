@@ -80,6 +80,13 @@ def collisions(s: Arrays, gain: float) -> np.ndarray:
     return np.sum(s["thigh_contacts"], axis=1).astype(float)
 
 
+def knee_clearance(s: Arrays, gain: float) -> np.ndarray:
+    """Sum over the legs of how far each knee (KFE joint) is below the clearance height above the terrain [m]:
+    sum_i max(0, h_c - h_knee,i), zero while every knee is at least h_c high (EnvConfig.knee_clearance)."""
+    deficit = s["knee_clearance_height"][:, None] - s["knee_heights"]
+    return np.sum(np.maximum(deficit, 0.0), axis=1)
+
+
 REWARD_TERMS: dict[str, Callable[[Arrays, float], np.ndarray]] = {
     f.__name__: f
     for f in (
@@ -96,6 +103,7 @@ REWARD_TERMS: dict[str, Callable[[Arrays, float], np.ndarray]] = {
         joint_acceleration,
         feet_air_time,
         collisions,
+        knee_clearance,
     )
 }
 

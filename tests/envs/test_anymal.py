@@ -374,3 +374,80 @@ def test_acceleration_filter_smooths_lambda_not_the_measured_accelerations(toy_w
         filtered = 0.5 * filtered + 0.5 * raw_acc[2]
         assert ema_acc[2] == pytest.approx(filtered, abs=1e-9)
     assert not np.allclose(ema_acc, raw_acc)
+
+
+def test_knee_clearance_term_matches_the_shank_bodies_in_mujoco(toy_weights: str) -> None:
+    """The term is sum_i max(0, h_c - z_knee,i), z_knee the SHANK body origin (the KFE joint) read from an
+    independent mj_forward of the same state; off by default."""
+    config = EnvConfig(robot="anymal_b", margin_weights=toy_weights, randomization=NO_NOISE)
+    off = AnymalCore(config, 1, seed=0)
+    off.reset()
+    assert "reward_knee_clearance" not in off.step(np.zeros((1, 12))).info
+
+    clearance = 0.35  # above the standing knees (about 0.28 m), so every knee counts
+    core = AnymalCore(config.replace(knee_clearance=2.0, knee_clearance_height=clearance), 2, seed=0)
+    core.reset()
+    for _ in range(5):
+        out = core.step(np.zeros((2, 12)))
+    for env in range(2):
+        data = core.render_data(env)
+        knees = np.array([data.body(f"{leg}_SHANK").xpos[2] for leg in core.robot.leg_names])
+        expected = -2.0 * np.sum(np.maximum(clearance - knees, 0.0))
+        assert expected < -0.1
+        np.testing.assert_allclose(out.info["reward_knee_clearance"][env], expected, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("knee_clearance", -1.0), ("knee_clearance_height", -0.1), ("knee_clearance", np.nan)]
+)
+def test_knee_clearance_rejects_bad_values(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        EnvConfig(**{field: value})
+
+
+def test_push_in_the_air_changes_the_momentum_by_the_impulse(toy_weights: str) -> None:
+    """A heading-frame push of the robot held high above the floor (no contacts): the horizontal CoM velocity
+    changes by J / m_total along the heading axis turned to the world, and lambda's f_ext is the push on every
+    step it acts (the last one too)."""
+    config = EnvConfig(robot="anymal_b", margin_weights=toy_weights, randomization=NO_NOISE)
+    core = AnymalCore(config, 2, seed=0)
+    core.reset()
+    yaw = np.array([0.0, 0.7])
+    core._qpos[:, 2] += 20.0  # far above the floor for the whole test
+    core._qpos[:, 3:7] = np.column_stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)])
+    core._qvel[:] = 0.0
+    core.batch.forward()
+    mass = mujoco.mj_getTotalmass(core.model)
+    force = np.array([[60.0, 0.0, 0.0], [0.0, -45.0, 0.0]])  # heading frame [N]
+    duration = 0.1
+    steps = core.push_steps(duration)
+    assert steps == 5
+    com_vel_before = core._read().com_vel.copy()
+    heading_at_push = heading_rotation(quat_wxyz_to_matrix(core._qpos[:, 3:7]))
+    core.push(np.arange(2), force, duration, frame="heading")
+    for _ in range(steps):
+        out = core.step(np.zeros((2, 12)))
+        ext = from_lambda(out.info["lambda"]).ext_force
+        np.testing.assert_allclose(ext, force, atol=1e-2)  # H = heading frame (the legs' servo motion turns
+        # the base by a few microradians in the air)
+    out = core.step(np.zeros((2, 12)))
+    np.testing.assert_array_equal(from_lambda(out.info["lambda"]).ext_force, 0.0)
+    dv = core._read().com_vel - com_vel_before
+    impulse = np.einsum("nij,nj->ni", heading_at_push, force) * steps * core.dt
+    # measured agreement: 1.5e-4 relative (the implicit integrator), bound at 1e-3
+    np.testing.assert_allclose(dv[:, :2], impulse[:, :2] / mass, rtol=1e-3, atol=1e-5)
+
+
+def test_push_rejects_bad_input(toy_weights: str) -> None:
+    core = AnymalCore(EnvConfig(robot="anymal_b", margin_weights=toy_weights), 2, seed=0)
+    core.reset()
+    with pytest.raises(ValueError, match="shape"):
+        core.push(np.arange(2), np.zeros((1, 3)), 0.1)
+    with pytest.raises(ValueError, match="finite"):
+        core.push(np.arange(1), np.array([[np.nan, 0, 0]]), 0.1)
+    with pytest.raises(ValueError, match="ids"):
+        core.push(np.array([5]), np.zeros((1, 3)), 0.1)
+    with pytest.raises(ValueError, match="duration"):
+        core.push(np.arange(1), np.zeros((1, 3)), 0.0)
+    with pytest.raises(ValueError, match="frame"):
+        core.push(np.arange(1), np.zeros((1, 3)), 0.1, frame="base")

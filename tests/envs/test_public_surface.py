@@ -249,6 +249,8 @@ NUMERIC_FIELDS: dict[type, list[str]] = {
         "episode_length_s",
         "margin_weight",
         "alive_bonus",
+        "knee_clearance",
+        "knee_clearance_height",
         "logistic_gain",
         "acceleration_filter",
         "privileged_observations",
@@ -277,7 +279,8 @@ NUMERIC_FIELDS: dict[type, list[str]] = {
     TerrainConfig: ["size", "resolution", "tile", "step_height", "max_slope_deg", "pad", "base_level", "max_height"],
 }
 NUMBER_FIELDS = {
-    "decimation", "action_scale", "episode_length_s", "margin_weight", "alive_bonus", "logistic_gain",
+    "decimation", "action_scale", "episode_length_s", "margin_weight", "alive_bonus", "knee_clearance",
+    "knee_clearance_height", "logistic_gain",
     "acceleration_filter", "push_force", "push_duration_s", "observation_noise", "reset_joint_noise",
     "reset_velocity_noise", "min_base_height", "max_tilt_rad", "size", "resolution", "tile", "max_slope_deg",
     "pad", "base_level", "max_height",

@@ -8,7 +8,9 @@ Each run directory holds ``config.json`` (``margin_rl.train.train``) and ``<eval
 (``python -m margin_rl.train.evaluate RUN/final_model.pt --episodes 64 --seed 5000 --out RUN/<eval>``). Run
 directories are never committed; this keeps, per run, the settings that define it (environment, margin
 weight, seed, steps, weights' sha256, acceleration filter) and the evaluation's per-metric mean and std, then
-groups the runs by margin weight (mean ± std over seeds, and the number of seeds).
+groups the runs by margin weight (mean ± std over seeds, and the number of seeds) and compares every other
+weight with weight 0 over the seeds (``"versus_baseline"``: difference, bootstrap interval and Welch test of
+:func:`margin_rl.train.significance.compare_seeds`; printed as a second table).
 """
 
 from __future__ import annotations
@@ -16,9 +18,12 @@ from __future__ import annotations
 import argparse
 import json
 from collections import defaultdict
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
+
+from margin_rl.train.significance import compare_seeds, difference_table
 
 METRICS = (
     "fell",
@@ -71,6 +76,36 @@ def by_weight(runs: list[dict[str, object]]) -> dict[str, dict[str, object]]:
     return out
 
 
+def versus_baseline(runs: list[dict[str, object]]) -> dict[str, dict[str, dict[str, object]]]:
+    """Per margin weight other than 0: each metric against weight 0 over the seeds (the runs' episode means),
+    as :class:`~margin_rl.train.significance.Difference` dicts; empty without runs at weight 0."""
+    groups: dict[str, list[dict]] = defaultdict(list)
+    for r in runs:
+        groups[str(r["margin_weight"])].append(r)  # keyed like by_weight
+    baseline = [r for weight, members in groups.items() if float(weight) == 0 for r in members]
+    if not baseline:
+        return {}
+
+    def seed_means(members: list[dict], metric: str) -> list[float | None]:
+        return [m["metrics"][metric]["mean"] if metric in m["metrics"] else None for m in members]
+
+    return {
+        str(weight): {
+            metric: asdict(
+                compare_seeds(
+                    metric,
+                    seed_means(baseline, metric),
+                    seed_means(members, metric),
+                    names=("margin weight 0", f"margin weight {weight}"),
+                )
+            )
+            for metric in METRICS
+        }
+        for weight, members in sorted(groups.items(), key=lambda kv: float(kv[0]))
+        if float(weight) != 0
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("runs", nargs="+", type=Path)
@@ -78,7 +113,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path, required=True)
     args = parser.parse_args()
     runs = [run_summary(r, args.eval) for r in sorted(args.runs) if (r / "config.json").is_file()]
-    record = {"runs": runs, "by_margin_weight": by_weight(runs)}
+    record = {"runs": runs, "by_margin_weight": by_weight(runs), "versus_baseline": versus_baseline(runs)}
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(record, indent=1) + "\n")
     print("| margin weight | seeds | falls | velocity error [m/s] | lin. acc. RMS [m/s²] | ang. acc. RMS [rad/s²] "
@@ -94,6 +129,16 @@ def main() -> None:
             f"| {cell('velocity_error_mean', '.3f')} | {cell('lin_acc_rms', '.2f')} | {cell('ang_acc_rms', '.1f')} "
             f"| {cell('stance_width_mean', '.3f')} | {cell('margin_mean', '.3f')} |"
         )
+
+    if record["versus_baseline"]:
+        print()
+        rows = [
+            ((weight, metric), difference)
+            for weight, differences in record["versus_baseline"].items()
+            for metric, difference in differences.items()
+        ]
+        for line in difference_table(rows, ("margin weight", "metric"), "difference (weight − weight 0)"):
+            print(line)
 
 
 if __name__ == "__main__":

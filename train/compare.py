@@ -66,6 +66,7 @@ from margin_rl.train.runs import (
     versions,
     write_json,
 )
+from margin_rl.train.significance import RESAMPLES, compare_variants, difference_table
 from margin_rl.train.train import DEFAULT_BACKEND, DEFAULT_NUM_ENVS, TrainSpec, make_spec, train
 
 __getattr__ = moved(__name__, {"COLORS": "margin_rl.train.media"})
@@ -154,7 +155,9 @@ def evaluate_variants(
     ``variants``: name -> (margin weight, [(training seed, policy file), ...]). A policy inside a run directory
     is evaluated into ``<run>/eval``, any other (e.g. a bundled one) into ``<out>/eval/<variant>__s<seed>``.
     ``env_options``: the options the runs were trained with (recorded); ``eval_env_overrides``: EnvConfig fields
-    changed for the evaluation only (a bundle's own learned-margin weights).
+    changed for the evaluation only (a bundle's own learned-margin weights). With both variants, the report's
+    ``"statistics"`` holds, per table metric, "with margin" against "without margin" over the training seeds
+    (:func:`margin_rl.train.significance.compare_seeds` as a dict).
     """
     out = Path(out)
     report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": dict(env_options or {})}
@@ -190,6 +193,9 @@ def evaluate_variants(
             "mean": {k: v[0] for k, v in table.items()},
             "std": {k: v[1] for k, v in table.items()},
         }
+    if {"without margin", "with margin"} <= set(report["variants"]):
+        differences = compare_variants(report["variants"], "without margin", "with margin")
+        report["statistics"] = {metric: asdict(difference) for metric, difference in differences.items()}
     out.mkdir(parents=True, exist_ok=True)
     report["plot"] = plot_accelerations(examples, out / "compare.png", settings).name
     report["table"] = write_markdown(report, out / "compare.md").name
@@ -204,7 +210,8 @@ def _settings_json(settings: CompareSettings) -> dict[str, Any]:
 
 
 def write_markdown(report: dict[str, Any], path: Path) -> Path:
-    """The comparison table (mean ± std over training seeds) as Markdown."""
+    """The comparison table (mean ± std over training seeds) as Markdown, then, when the report has
+    ``"statistics"``, the differences with − without margin with their interval and test."""
     s = report["settings"]
     lines = [
         f"# Margin reward comparison: {s['env_id']} ({s['backend']})",
@@ -225,6 +232,17 @@ def write_markdown(report: dict[str, Any], path: Path) -> Path:
     ]
     if missing:
         lines += ["", "Not computed (n/a, or left out of a mean):", *missing]
+    if report.get("statistics"):
+        rows = [((SUMMARY_METRICS.get(k, k),), difference) for k, difference in report["statistics"].items()]
+        lines += [
+            "",
+            "Differences with − without margin over training seeds (the unit: one seed's mean over its episodes): "
+            "two-sided Welch t-test and the interval that inverts it, and a percentile bootstrap interval "
+            f"({RESAMPLES:,} resamples of each variant's seeds; narrower than its nominal level with a few seeds). "
+            "With a few seeds a test has little power: not significant is not no difference.",
+            "",
+            *difference_table(rows, difference_header="difference (with − without)"),
+        ]
     lines += ["", f"![base acceleration]({report['plot']})", ""]
     path.write_text("\n".join(lines))
     return path

@@ -39,7 +39,7 @@ install: $(STAMP)
 # The main job: evaluate the bundled ANYmal B policies (with and without the margin term) and write the
 # comparison plot and table into results/anymal_b (a few minutes on CPU).
 demo: install
-	$(PY) -m margin_rl.train.compare --bundled anymal_b --out results/anymal_b
+	$(PY) -m margin_rl.train.compare --bundled anymal_b_v1 --out results/anymal_b_v1
 
 lint: install
 	$(PY) -m ruff check .

@@ -1,7 +1,7 @@
 """Which accelerations should enter lambda? Three estimators along walking episodes, and the margin each gives.
 
 Usage:
-    python benchmarks/bench_acceleration_estimates.py [--bundle anymal_b] [--episodes 4] [--steps 250] \
+    python benchmarks/bench_acceleration_estimates.py [--bundle anymal_b_v1] [--episodes 4] [--steps 250] \
         [--figure docs/learned_margin/acceleration_estimates_anymal_b.png]
 
 The bundled policies (both variants, ``--episodes`` seeds each) walk at 0.75 m/s; after every 20 ms policy
@@ -175,7 +175,7 @@ def plot(episode: dict[str, dict[str, np.ndarray]], path: Path, title: str) -> N
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--bundle", default="anymal_b")
+    parser.add_argument("--bundle", default="anymal_b_v1")
     parser.add_argument("--episodes", type=int, default=4, help="evaluation seeds per variant")
     parser.add_argument("--steps", type=int, default=250, help="policy steps per episode (20 ms each)")
     parser.add_argument("--figure", type=Path, default=None)

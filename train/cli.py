@@ -4,7 +4,7 @@
 option overrides (EnvConfig fields for the ANYmal ids, constructor keywords for the others).
 
 Training defaults of the command line (``train`` and ``compare``, ANYmal ids only): the shipped, working
-experiment of the README and ``bundled/anymal_b/CARD.md``, margin weight :data:`CLI_MARGIN_WEIGHT` and
+experiment of the README and ``bundled/anymal_b_v1/CARD.md``, margin weight :data:`CLI_MARGIN_WEIGHT` and
 ``alive_bonus`` :data:`CLI_ALIVE_BONUS` (:func:`with_training_defaults`). ``EnvConfig``'s own defaults (the
 paper's reward: weight 1, no bonus) stay what the Python API and the environments use: with them, a trot's
 negative learned margin makes every step's reward negative and PPO learns to fall.

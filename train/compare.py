@@ -26,7 +26,7 @@ trained with, into a policy bundle with a card (:mod:`margin_rl.train.bundle`); 
 and evaluates a bundle the same way, with the bundle's margin weights, e.g. the shipped ANYmal B policies (the
 README's main job)::
 
-    python -m margin_rl.train.compare --bundled anymal_b --out results/anymal_b
+    python -m margin_rl.train.compare --bundled anymal_b_v1 --out results/anymal_b_v1
 
 With ``--bundled``, ``--env-option``/``--margin-weights`` change the evaluation environment (other terrain, the
 package's current margin weights, ...); the card's table then need not be reproduced.

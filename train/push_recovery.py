@@ -50,7 +50,7 @@ DIRECTIONS = ("longitudinal", "lateral")
 class PushProtocol:
     """Pushes of increasing impulse at random gait phases (see the module docstring)."""
 
-    impulses: tuple[float, ...] = (0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0)  # [N s]
+    impulses: tuple[float, ...] = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0)  # [N s]; 15 N s is 0.5 m/s on 30 kg
     directions: tuple[str, ...] = DIRECTIONS
     forward_velocities: tuple[float, ...] = (0.75, 0.5, 1.0)  # commands [m/s]; the first is the trained one
     episodes: int = 16  # per (direction, impulse, command) and policy

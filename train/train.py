@@ -18,7 +18,7 @@ there; ``--backend rsl`` is an error): SB3's ``DummyVecEnv`` of ``gymnasium.make
 ``--margin-weight`` its ``margin_weight`` keyword when it has one (``margin_rl/SLIPHopper-v0`` does); other
 names are an error listing the keywords it takes. See :mod:`margin_rl.train.environments`.
 
-Defaults for the ANYmal ids: the shipped, working experiment of the README and ``bundled/anymal_b/CARD.md``,
+Defaults for the ANYmal ids: the shipped, working experiment of the README and ``bundled/anymal_b_v1/CARD.md``,
 ``--margin-weight 0.2`` and ``--env-option alive_bonus=0.1`` unless given (:mod:`margin_rl.train.cli`;
 ``make_spec`` and ``EnvConfig`` keep the paper's reward: weight 1, no bonus).
 

@@ -10,9 +10,9 @@ from margin_rl.train.evaluate import evaluate
 from margin_rl.train.policies import load_policy
 
 
-def test_anymal_b_bundle_is_shipped_with_both_variants_and_three_seeds() -> None:
-    assert "anymal_b" in bundled_names()
-    bundle = load_bundle("anymal_b")  # verifies every checksum
+def test_anymal_b_v1_bundle_is_shipped_with_both_variants_and_three_seeds() -> None:
+    assert "anymal_b_v1" in bundled_names()
+    bundle = load_bundle("anymal_b_v1")  # verifies every checksum
     variants = bundle.variants()
     assert set(variants) == {"without margin", "with margin"}
     assert variants["without margin"][0] == 0.0 and variants["with margin"][0] > 0.0
@@ -26,7 +26,7 @@ def test_bundle_carries_the_learned_margin_its_policies_were_trained_with() -> N
     bundle stays reproducible when the package's own anymal_b weights are retrained."""
     from margin_rl.stability import LearnedMargin
 
-    bundle = load_bundle("anymal_b")  # also checks every policy's recorded weights against the carried copy
+    bundle = load_bundle("anymal_b_v1")  # also checks every policy's recorded weights against the carried copy
     assert bundle.margin_weights is not None and bundle.margin_weights.is_file()
     carried = LearnedMargin.load(bundle.margin_weights)
     for entry in bundle.card["policies"]:
@@ -36,7 +36,7 @@ def test_bundle_carries_the_learned_margin_its_policies_were_trained_with() -> N
 
 @pytest.mark.parametrize("variant", ["without margin", "with margin"])
 def test_bundled_policy_walks_at_the_commanded_speed(variant: str, tmp_path) -> None:
-    bundle = load_bundle("anymal_b")
+    bundle = load_bundle("anymal_b_v1")
     _, policies = bundle.variants()[variant]
     seed, path = policies[0]
     policy = load_policy(path)

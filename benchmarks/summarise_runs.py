@@ -54,6 +54,7 @@ def run_summary(run: Path, eval_name: str) -> dict[str, object]:
         "margin_weights": env.get("margin_weights") or f"bundled {env.get('robot')}",
         "acceleration_filter": env.get("acceleration_filter"),
         "alive_bonus": env.get("alive_bonus"),
+        "knee_clearance": env.get("knee_clearance", 0.0),
         "evaluation": {"episodes": metrics.get("episodes"), "seed": metrics.get("seed")},
         "metrics": {k: metrics["summary"][k] for k in METRICS if k in metrics["summary"]},
     }

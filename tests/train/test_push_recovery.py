@@ -141,3 +141,17 @@ def test_command_line_on_a_tiny_run(rsl_run: Path, tmp_path: Path, capsys: pytes
 def test_command_line_names_a_missing_policy(tmp_path: Path) -> None:
     with pytest.raises(SystemExit):
         main(["--variant", "with margin", str(tmp_path / "nope.pt"), "--out", str(tmp_path)])
+
+
+def test_command_line_on_a_shipped_bundle(tmp_path: Path) -> None:
+    """A bundle's policies are pushed in their training environments with the bundle's own margin weights."""
+    argv = [
+        "--bundled", "anymal_b_v1", "--impulses", "0", "--episodes", "1", "--directions", "lateral",
+        "--forward-velocities", "0.75", "--recovery-s", "0.5", "--out", str(tmp_path),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    report = json.loads((tmp_path / "push_recovery.json").read_text())
+    assert report["env_overrides"]["margin_weights"].endswith(".npz")
+    for variant in report["variants"].values():
+        assert len(variant["policies"]) == 3
+        assert variant["survival"]["lateral@0.75"]["mean"] == [1.0]  # no push: the bundled policies walk on

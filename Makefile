@@ -1,6 +1,6 @@
 # Two commands do all setup on a fresh machine:
 #   make demo   create .venv if missing, install torch (CPU) then margin_rl, run the main job (evaluate the
-#               bundled policies: comparison plot and table in results/anymal_b)
+#               bundled ANYmal B and C policies: comparison table and plot, push recovery, in results/<bundle>)
 #   make test   same setup, then ruff and the full test suite
 # torch is installed first and explicitly: on these machines `torch==2.13.0` is a local CPU wheel,
 # while any other torch request (e.g. pulled in by a dependency) downloads GBs of CUDA packages.
@@ -36,10 +36,16 @@ $(STAMP): $(PY) pyproject.toml | gl-deps
 
 install: $(STAMP)
 
-# The main job: evaluate the bundled ANYmal B policies (with and without the margin term) and write the
-# comparison plot and table into results/anymal_b (a few minutes on CPU).
+# The main job: evaluate the bundled ANYmal B and C policies (with and without the margin term) and write, per
+# robot into results/<bundle>, the comparison table with its statistics, the Fig. 9-style plot and the
+# push-recovery curves (a few minutes on CPU).
+DEMO_BUNDLES ?= anymal_b anymal_c
 demo: install
-	$(PY) -m margin_rl.train.compare --bundled anymal_b_v1 --out results/anymal_b_v1
+	@for bundle in $(DEMO_BUNDLES); do \
+	  $(PY) -m margin_rl.train.compare --bundled $$bundle --out results/$$bundle || exit 1; \
+	  $(PY) -m margin_rl.train.push_recovery --bundled $$bundle --episodes 8 --forward-velocities 0.75 \
+	    --out results/$$bundle || exit 1; \
+	done
 
 lint: install
 	$(PY) -m ruff check .

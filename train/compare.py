@@ -19,7 +19,12 @@ measured for the baseline too. Outputs in ``<out>``:
   evaluation episodes) of velocity tracking error, base linear and angular acceleration RMS, stance width,
   margin and falls, with every run's numbers in the JSON. A metric an evaluation could not compute (e.g. the
   acceleration RMS of episodes shorter than ``--warmup-s``) is ``null`` there with its reason in the run's
-  ``"not_computed": {metric: reason}`` and listed under the Markdown table (both only when it happens).
+  ``"not_computed": {metric: reason}`` and listed under the Markdown table (both only when it happens); and, per
+  metric, the difference with − without margin over the training seeds with a two-sided Welch test, the interval
+  that inverts it and a bootstrap interval (``"statistics"`` in the JSON, a second table in the Markdown;
+  :mod:`margin_rl.train.significance`).
+
+Push recovery of the same policies: :mod:`margin_rl.train.push_recovery` (``--bundled NAME`` or ``--variant``).
 
 ``--bundle DIR`` then copies the runs' TorchScript actors and configs, and the learned-margin weights they were
 trained with, into a policy bundle with a card (:mod:`margin_rl.train.bundle`); ``--bundled NAME`` trains nothing

@@ -108,14 +108,15 @@ def print_rows(title: str, rows: list[dict[str, float]]) -> dict[str, float] | N
 
 
 def summarise_by_weight(records: list[dict]) -> dict[str, dict]:
-    """Per margin weight: runs, how many met the target, minutes to it (mean, std over those that met it)."""
+    """Per environment and margin weight ("<env id> w=<weight>"): runs, how many met the target, minutes to it
+    (mean, std over those that met it)."""
     import numpy as np
 
     groups: dict[str, list[dict]] = {}
     for record in records:
-        groups.setdefault(f"{record['margin_weight']:g}", []).append(record)
+        groups.setdefault(f"{record['env_id']} w={record['margin_weight']:g}", []).append(record)
     summary = {}
-    for weight, members in sorted(groups.items(), key=lambda kv: float(kv[0])):
+    for weight, members in sorted(groups.items()):
         minutes = [m["first_met"]["minutes"] for m in members if m["first_met"] is not None]
         summary[weight] = {
             "runs": len(members),
@@ -124,6 +125,15 @@ def summarise_by_weight(records: list[dict]) -> dict[str, dict]:
             "minutes_std": float(np.std(minutes)) if minutes else None,
         }
     return summary
+
+
+def print_summary(summary: dict[str, dict], episodes: list[int]) -> None:
+    print(f"\n{episodes} deterministic 20 s episodes per checkpoint (seed 1000), command 0.75 m/s\n")
+    print("| environment, margin weight | runs | met the target | minutes to the target (mean ± std over those) |")
+    print("|---|---|---|---|")
+    for group, s in summary.items():
+        minutes = f"{s['minutes_mean']:.1f} ± {s['minutes_std']:.1f}" if s["met"] else "–"
+        print(f"| {group} | {s['runs']} | {s['met']} | {minutes} |")
 
 
 def main() -> None:
@@ -140,9 +150,22 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("runs") / "bench_learning_speed")
     parser.add_argument("--from-run", type=Path, nargs="+", help="evaluate the checkpoints of these finished runs")
     parser.add_argument("--json", type=Path, help="also write the whole record here (e.g. under docs/)")
+    parser.add_argument(
+        "--merge", type=Path, nargs="+", help="evaluate nothing: merge the records of earlier --json files into --json"
+    )
     args = parser.parse_args()
     from margin_rl.train.runs import CONFIG_FILE, read_json, write_json
 
+    if args.merge is not None:
+        if args.json is None:
+            parser.error("--merge needs --json")
+        records = [r for path in args.merge for r in read_json(path)["runs"]]
+        episodes = {read_json(path)["episodes"] for path in args.merge}
+        write_json(
+            args.json, {"episodes": sorted(episodes), "runs": records, "by_margin_weight": summarise_by_weight(records)}
+        )
+        print_summary(summarise_by_weight(records), sorted(episodes))
+        return
     if args.from_run is None:
         if args.out.exists():
             parser.error(f"{args.out} exists: give a fresh --out (the timeline needs a run from step 0)")
@@ -160,12 +183,7 @@ def main() -> None:
         records.append({**record, "rows": rows, "first_met": first})
         write_json(run_dir / "learning_speed.json", {"args": {k: str(v) for k, v in vars(args).items()}, "rows": rows})
     summary = summarise_by_weight(records)
-    print(f"\n{args.episodes} deterministic 20 s episodes per checkpoint (seed 1000), command 0.75 m/s\n")
-    print("| margin weight | runs | met the target | minutes to the target (mean ± std over those) |")
-    print("|---|---|---|---|")
-    for weight, s in summary.items():
-        minutes = f"{s['minutes_mean']:.1f} ± {s['minutes_std']:.1f}" if s["met"] else "–"
-        print(f"| {weight} | {s['runs']} | {s['met']} | {minutes} |")
+    print_summary(summary, [args.episodes])
     if args.json is not None:
         write_json(args.json, {"episodes": args.episodes, "runs": records, "by_margin_weight": summary})
 

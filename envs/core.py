@@ -523,7 +523,7 @@ class AnymalCore:
             self._push_force[start] = rnd.push_force * np.column_stack(
                 [np.cos(angle), np.sin(angle), np.zeros_like(angle)]
             )
-            self._push_steps_left[start] = max(1, round(rnd.push_duration_s / self.dt))
+            self._push_steps_left[start] = self.push_steps(rnd.push_duration_s)
             self._next_push[start] = self.rng.exponential(rnd.push_interval_s / self.dt, size=int(start.sum()))
 
     # ------------------------------------------------------------------ observations

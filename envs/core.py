@@ -325,10 +325,12 @@ class AnymalCore:
             "touchdown": touchdown,
             "air_time_at_touchdown": air_at_touchdown,
             "thigh_contacts": state.thigh_contacts,
-            "knee_heights": state.knees[..., 2] - self.terrain.height(state.knees[..., :2]),
-            "knee_clearance_height": np.full(self.num_envs, cfg.knee_clearance_height),
         }
-        reward, terms = compute_rewards(cfg.reward_weights, values, cfg.logistic_gain)
+        weights = cfg.reward_weights
+        if "knee_clearance" in weights:  # a terrain lookup per knee: only when the term is on
+            values["knee_heights"] = state.knees[..., 2] - self.terrain.height(state.knees[..., :2])
+            values["knee_clearance_height"] = np.full(self.num_envs, cfg.knee_clearance_height)
+        reward, terms = compute_rewards(weights, values, cfg.logistic_gain)
         self.last_action = action.copy()
         terminated = self._terminations(state, diverged)
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate

@@ -326,9 +326,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _variants_from_args(args: argparse.Namespace) -> dict[str, list[tuple[int, Path]]]:
+def _variants_from_args(args: argparse.Namespace) -> tuple[dict[str, list[tuple[int, Path]]], dict[str, Any]]:
+    """The variants' policies, and the EnvConfig overrides they are evaluated with (a bundle's margin weights)."""
     if args.bundled is not None:
-        return {name: list(policies) for name, (_, policies) in load_bundle(args.bundled).variants().items()}
+        bundle = load_bundle(args.bundled)  # verifies every checksum once
+        return {name: list(runs) for name, (_, runs) in bundle.variants().items()}, bundle.env_overrides()
     variants: dict[str, list[tuple[int, Path]]] = {}
     for entry in args.variant:
         if len(entry) < 2:
@@ -338,7 +340,7 @@ def _variants_from_args(args: argparse.Namespace) -> dict[str, list[tuple[int, P
         if missing:
             raise ValueError(f"--variant {name!r}: no such policy file {missing[0]}")
         variants[name] = [(i, Path(p)) for i, p in enumerate(paths)]
-    return variants
+    return variants, {}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -355,10 +357,8 @@ def main(argv: list[str] | None = None) -> int:
             recovery_s=args.recovery_s,
             seed=args.seed,
         )
-        variants = _variants_from_args(args)
-        options = env_overrides(args)
-        if args.bundled is not None:
-            options = {**load_bundle(args.bundled).env_overrides(), **options}
+        variants, bundle_options = _variants_from_args(args)
+        options = {**bundle_options, **env_overrides(args)}
         report = run_push_recovery(variants, protocol, args.out, options)
     except (ValueError, TypeError) as exc:
         parser.error(str(exc))

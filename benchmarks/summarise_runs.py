@@ -60,13 +60,18 @@ def run_summary(run: Path, eval_name: str) -> dict[str, object]:
     }
 
 
-def by_weight(runs: list[dict[str, object]]) -> dict[str, dict[str, object]]:
-    """Per margin weight: each metric's mean and std over the runs' (seeds') episode means."""
+def weight_groups(runs: list[dict[str, object]]) -> list[tuple[str, list[dict]]]:
+    """The runs grouped by margin weight (keyed by its string), in increasing weight."""
     groups: dict[str, list[dict]] = defaultdict(list)
     for r in runs:
         groups[str(r["margin_weight"])].append(r)
+    return sorted(groups.items(), key=lambda kv: float(kv[0]))
+
+
+def by_weight(runs: list[dict[str, object]]) -> dict[str, dict[str, object]]:
+    """Per margin weight: each metric's mean and std over the runs' (seeds') episode means."""
     out = {}
-    for weight, members in sorted(groups.items(), key=lambda kv: float(kv[0])):
+    for weight, members in weight_groups(runs):
         table = {}
         for metric in METRICS:
             values = [m["metrics"][metric]["mean"] for m in members if metric in m["metrics"]]
@@ -80,10 +85,8 @@ def by_weight(runs: list[dict[str, object]]) -> dict[str, dict[str, object]]:
 def versus_baseline(runs: list[dict[str, object]]) -> dict[str, dict[str, dict[str, object]]]:
     """Per margin weight other than 0: each metric against weight 0 over the seeds (the runs' episode means),
     as :class:`~margin_rl.train.significance.Difference` dicts; empty without runs at weight 0."""
-    groups: dict[str, list[dict]] = defaultdict(list)
-    for r in runs:
-        groups[str(r["margin_weight"])].append(r)  # keyed like by_weight
-    baseline = [r for weight, members in groups.items() if float(weight) == 0 for r in members]
+    groups = weight_groups(runs)
+    baseline = [r for weight, members in groups if float(weight) == 0 for r in members]
     if not baseline:
         return {}
 
@@ -102,7 +105,7 @@ def versus_baseline(runs: list[dict[str, object]]) -> dict[str, dict[str, dict[s
             )
             for metric in METRICS
         }
-        for weight, members in sorted(groups.items(), key=lambda kv: float(kv[0]))
+        for weight, members in groups
         if float(weight) != 0
     }
 

@@ -143,7 +143,8 @@ def run_pushes(policy: LoadedPolicy, target: AnymalTarget, protocol: PushProtoco
     end = start + round(protocol.recovery_s / core.dt)
     core.reset()
     obs = core.observe_all()
-    fell_at = np.full(core.num_envs, np.iinfo(np.int64).max)
+    standing = np.iinfo(np.int64).max  # fell_at of an episode that has not fallen (yet)
+    fell_at = np.full(core.num_envs, standing)
     for step in range(int(end.max())):
         due = np.nonzero(start == step)[0]
         if due.size:
@@ -151,9 +152,9 @@ def run_pushes(policy: LoadedPolicy, target: AnymalTarget, protocol: PushProtoco
             core.push(due, forces, protocol.duration_s, frame="heading")
         out = core.step(policy(obs))
         obs = out.observation
-        newly = out.terminated & (fell_at == np.iinfo(np.int64).max)
+        newly = out.terminated & (fell_at == standing)
         fell_at[newly] = step
-        if np.all((fell_at < np.iinfo(np.int64).max) | (step + 1 >= end)):
+        if np.all((fell_at < standing) | (step + 1 >= end)):
             break
     fell_before = fell_at < start
     survived = ~fell_before & (fell_at >= end)

@@ -13,6 +13,9 @@ PPO itself is rsl-rl's. :class:`CheckpointingRunner` only changes where and how 
 random-number states inside), and hooks the runner's per-iteration logger call to advance the progress bar
 and to stop at an iteration boundary when a stop is requested (SIGINT/SIGTERM).
 
+Warm start (``init_from``): a new run begins with the actor and critic (with their normalisers) of a trained model
+of the same sizes; everything else is the new run's.
+
 Resume: the checkpoint restores actor, critic (with their observation normalisers), optimizer and learning
 rate (the adaptive schedule's), the iteration counter (the next iteration is numbered after the last completed
 one, so TensorBoard's x axis continues) and the torch/numpy generators. Episodes running at the stop are
@@ -218,6 +221,39 @@ class CheckpointingRunner(OnPolicyRunner):
         torch.set_rng_state(infos["torch_rng_state"])
         self.adapter.core.rng.bit_generator.state = infos["numpy_rng_state"]
 
+    def warm_start(self, path: Path) -> None:
+        """Begin with the actor and critic (and their observation normalisers) of a trained model.
+
+        ``path`` is a margin_rl rsl-rl checkpoint or final model; its policy must see the same observation and give
+        the same actions as this run's environment, and its networks must have this run's shapes. Optimizer,
+        learning rate, iteration counter and random generators stay this run's own (a new run).
+
+        Raises:
+            ValueError: not a margin_rl rsl-rl model, or sizes or network shapes that differ from this run's.
+        """
+        loaded = torch.load(path, map_location="cpu", weights_only=True)
+        infos = loaded.get("infos") or {}
+        if infos.get("format") != CHECKPOINT_FORMAT:
+            raise ValueError(f"--init-from {path}: not a margin_rl rsl-rl model (format {infos.get('format')!r})")
+        obs_dim = int(self.adapter.get_observations()["policy"].shape[-1])
+        sizes = {
+            "observation": (int(infos["obs_dim"]), obs_dim),
+            "action": (int(infos["num_actions"]), int(self.adapter.num_actions)),
+        }
+        for name, (theirs, ours) in sizes.items():
+            if theirs != ours:
+                raise ValueError(
+                    f"--init-from {path}: its policy has a {name} of size {theirs}, this run's environment {ours}; "
+                    "start from a model trained on the same robot and observation layout"
+                )
+        try:
+            self.alg.load(loaded, {"actor": True, "critic": True}, strict=True)
+        except RuntimeError as exc:  # load_state_dict's message lists the mismatched tensors
+            raise ValueError(
+                f"--init-from {path}: its networks differ from this run's (hidden sizes, activation, privileged "
+                f"critic observations must match): {exc}"
+            ) from exc
+
     def close_writer(self) -> None:
         """Flush and close the TensorBoard writer (the runner leaves a SummaryWriter open)."""
         writer = self.logger.writer
@@ -248,14 +284,18 @@ def train_rsl(
     checkpoint: Path | None,
     hooks: RunHooks,
     final_model: Path,
+    init_from: str | Path | None = None,
 ) -> tuple[int, bool, Path | None]:
     """Run (or continue) rsl-rl PPO up to ``total_iterations``; returns (env steps, stopped, TorchScript path).
 
-    The caller seeds torch before calling (the networks are initialised here).
+    The caller seeds torch before calling (the networks are initialised here). ``init_from``: a trained model whose
+    weights a new run starts from (:meth:`CheckpointingRunner.warm_start`); ignored when continuing a checkpoint.
     """
     runner = CheckpointingRunner(env, train_cfg, run_dir, device, hooks)
     if checkpoint is not None:
         runner.restore(checkpoint)
+    elif init_from is not None:
+        runner.warm_start(Path(init_from))
     remaining = total_iterations - runner.completed_iterations
     try:
         if remaining > 0:

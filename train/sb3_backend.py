@@ -20,6 +20,9 @@ for its ``info["reward_<term>"]``), throughput, drives the progress bar, writes
 previous update, a consistent state) and, when a stop is requested, writes one there and ends ``learn`` before
 any new data is collected.
 
+Warm start (``init_from``): a new model begins with the policy weights of a trained one of the same shapes (its
+optimizer, step count and schedules are the new run's).
+
 Resume: ``PPO.load`` restores the policy, optimizer and ``num_timesteps``; ``learn(reset_num_timesteps=False)``
 continues the step count, and the TensorBoard logger appends to the same folder. SB3 does not save its random
 generators, and episodes running at the stop are lost (the environments start fresh).
@@ -46,6 +49,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
+from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper
 
 from margin_rl.atomic import atomic_write
@@ -359,6 +363,33 @@ def export_torchscript(model: PPO, path: Path) -> Path:
     return atomic_write(path, lambda f: f.write(data))
 
 
+def warm_start(model: PPO, path: Path) -> None:
+    """Give a new model the policy weights (actor, critic, log std) of a trained SB3 model of the same shapes.
+
+    Only the policy's parameters are taken: the new model keeps its own optimizer, step count and schedules.
+
+    Raises:
+        ValueError: the file's observation or action space, or its network shapes, differ from the model's.
+    """
+    warn_unpickling(path)
+    data, params, _ = load_from_zip_file(path, device=model.device)
+    for name in ("observation_space", "action_space"):
+        theirs, ours = (data or {}).get(name), getattr(model, name)
+        if theirs is not None and getattr(theirs, "shape", None) != ours.shape:
+            raise ValueError(
+                f"--init-from {path}: its {name} has shape {theirs.shape}, this run's environment {ours.shape}; "
+                "start from a model trained on the same robot and observation layout"
+            )
+    if not params or "policy" not in params:
+        raise ValueError(f"--init-from {path}: no policy weights in it (not a Stable-Baselines3 model?)")
+    try:
+        model.policy.load_state_dict(params["policy"], strict=True)
+    except RuntimeError as exc:  # the message lists the mismatched tensors
+        raise ValueError(
+            f"--init-from {path}: its networks differ from this run's (net_arch, activation): {exc}"
+        ) from exc
+
+
 def train_sb3(
     venv: VecEnv,
     ppo: Sb3PPOConfig,
@@ -370,16 +401,20 @@ def train_sb3(
     checkpoint: Path | None,
     hooks: RunHooks,
     final_model: Path,
+    init_from: str | Path | None = None,
 ) -> tuple[int, bool, Path | None]:
     """Run (or continue) SB3 PPO up to ``total_steps``; returns (env steps, stopped, TorchScript path).
 
-    ``venv`` must also be an :class:`EpisodeMetricsSource` (read by the callback).
+    ``venv`` must also be an :class:`EpisodeMetricsSource` (read by the callback). ``init_from``: a trained SB3
+    model whose weights a new run starts from (:func:`warm_start`); ignored when continuing a checkpoint.
     """
     if checkpoint is not None:
         warn_unpickling(checkpoint)
         model = PPO.load(checkpoint, env=venv, device=device)
     else:
         model = make_model(venv, ppo, seed, device)
+        if init_from is not None:
+            warm_start(model, Path(init_from))
     formats = ["tensorboard", "stdout"] if hooks.verbose else ["tensorboard"]
     model.set_logger(configure(str(run_dir / TENSORBOARD_DIR), formats))
     callback = TrainingCallback(venv, run_dir, checkpoint_every, hooks)

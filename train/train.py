@@ -7,6 +7,8 @@ Examples::
     python -m margin_rl.train.train --backend sb3 --margin-weight 0 --run-dir runs/baseline
     python -m margin_rl.train.train --resume runs/baseline            # continue a stopped or killed run
     python -m margin_rl.train.train --resume runs/baseline --total-steps 10000000   # ... and extend it
+    python -m margin_rl.train.train --env margin_rl/AnymalB-Rough-v0 --margin-weight 0 --total-steps 3000000 \
+        --init-from runs/baseline/final_model.pt --run-dir runs/baseline_rough    # fine-tune a flat policy
     python -m margin_rl.train.train --env margin_rl/SLIPHopper-v0 --backend sb3 --margin-weight 0.5 \\
         --num-envs 8 --total-steps 20000 --env-option goal_velocity=0.5
 
@@ -51,6 +53,7 @@ import torch
 from tqdm import tqdm
 
 from margin_rl.envs.config import EnvConfig
+from margin_rl.provenance import sha256_file
 from margin_rl.train import cli
 from margin_rl.train.compat import moved
 from margin_rl.train.config import (
@@ -76,6 +79,7 @@ from margin_rl.train.rsl_backend import rsl_vec_env, train_rsl
 from margin_rl.train.runs import (
     CONFIG_FILE,
     PROGRESS_FILE,
+    TORCHSCRIPT_FILE,
     RunHooks,
     StopRequest,
     checkpoint_steps,
@@ -127,6 +131,9 @@ class TrainSpec:
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY  # environment steps between checkpoints
     device: str = "cpu"  # learner device (the simulation always runs on the CPU)
     env_kwargs: dict[str, Any] | None = field(default=None, hash=False)  # other ids (a dict cannot be hashed)
+    # Warm start: the network weights of this trained model (rsl-rl .pt checkpoint or final model, SB3 .zip) are the
+    # run's first weights; steps, optimizer and learning-rate schedule start fresh. None: random initialisation.
+    init_from: str | None = None
 
     def __post_init__(self) -> None:
         if self.env_config is not None and self.env_kwargs is not None:
@@ -145,6 +152,8 @@ class TrainSpec:
         for name in ("num_envs", "total_steps", "checkpoint_every"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.init_from is not None and not isinstance(self.init_from, str):
+            raise TypeError(f"init_from must be None or a path (str), got {self.init_from!r}")
 
     @property
     def is_anymal(self) -> bool:
@@ -194,6 +203,7 @@ class TrainSpec:
             "total_steps": self.total_steps,
             "checkpoint_every": self.checkpoint_every,
             "device": self.device,
+            "init_from": self.init_from,
             **env,
             "ppo": to_dict(self.ppo),
         }
@@ -219,6 +229,7 @@ class TrainSpec:
             env_config=None if env_kwargs is not None else from_dict(EnvConfig, data["env_config"], "env_config"),
             env_kwargs=env_kwargs,
             ppo=from_dict(ppo_class, data["ppo"], "ppo"),
+            init_from=data.get("init_from"),  # absent in runs recorded before warm starts existed
         )
 
 
@@ -291,6 +302,28 @@ def check_environment(spec: TrainSpec) -> None:
     spec.target.check()
 
 
+INIT_FROM_SUFFIX = {"rsl": ".pt", "sb3": ".zip"}
+"""File type of a warm start per backend: an rsl-rl training checkpoint or final model, an SB3 model."""
+
+
+def check_init_from(path: str, backend: str) -> None:
+    """A warm start must be an existing model file of the run's backend (its sizes are checked when it is loaded).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: a file of the other backend, or a TorchScript actor (it holds no critic to continue from).
+    """
+    file = Path(path)
+    if not file.is_file():
+        raise FileNotFoundError(f"--init-from {path}: no such file; give a finished run's final model or a checkpoint")
+    wanted = INIT_FROM_SUFFIX[backend]
+    if file.suffix != wanted or file.name == TORCHSCRIPT_FILE:
+        raise ValueError(
+            f"--init-from {path}: a {backend} run starts from a {backend} model ({wanted}: the run's "
+            f"{final_model_name(backend)} or a checkpoints/ckpt_<steps>{wanted}), not {file.name!r}"
+        )
+
+
 def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) -> Path:
     """``config.json``: the spec, the exact backend settings, versions, time and command line.
 
@@ -306,8 +339,10 @@ def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) 
         "sessions": [{"started": now, "command": command if command is not None else []}],
     }
     path = run_dir / CONFIG_FILE
-    if path.is_file():
-        previous = read_json(path)
+    previous = read_json(path) if path.is_file() else {}
+    if spec.init_from is not None:  # what the run started from: a resumed run keeps the first session's checksum
+        data["init_from_sha256"] = previous.get("init_from_sha256") or sha256_file(spec.init_from)
+    if previous:
         data["created"] = previous.get("created", now)
         data["command"] = previous.get("command", data["command"])
         data["sessions"] = [*previous.get("sessions", []), *data["sessions"]]
@@ -371,6 +406,8 @@ def train(
         raise FileExistsError(f"{run_dir} already holds checkpoints; use --resume to continue it, or another --run-dir")
     if not resume:
         checkpoint = None
+    if checkpoint is None and spec.init_from is not None:  # a resumed run continues from its own checkpoint
+        check_init_from(spec.init_from, spec.backend)
     run_dir.mkdir(parents=True, exist_ok=True)
     write_run_config(spec, run_dir, command)
     start = checkpoint_steps(checkpoint) if checkpoint is not None else 0
@@ -417,11 +454,23 @@ def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks:
     if isinstance(spec.ppo, RslPPOConfig):
         env = rsl_vec_env(spec.target, spec.num_envs, spec.seed)
         cfg = spec.backend_config(run_dir.name)
-        return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final)
+        return train_rsl(
+            env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final, init_from=spec.init_from
+        )
     venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed)
     total = spec.total_iterations * spec.steps_per_iteration
     return train_sb3(
-        venv, spec.ppo, run_dir, spec.seed, spec.device, total, spec.checkpoint_every, checkpoint, hooks, final
+        venv,
+        spec.ppo,
+        run_dir,
+        spec.seed,
+        spec.device,
+        total,
+        spec.checkpoint_every,
+        checkpoint,
+        hooks,
+        final,
+        init_from=spec.init_from,
     )
 
 
@@ -463,6 +512,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="RUN_DIR",
         help="continue this run from its latest checkpoint (its config.json; --total-steps may extend it)",
     )
+    parser.add_argument(
+        "--init-from",
+        metavar="MODEL",
+        help="warm start: begin with the weights of this trained model (rsl: a run's final_model.pt or checkpoint; "
+        "sb3: .zip), e.g. a flat-ground policy to fine-tune on rough ground; steps and optimizer start fresh",
+    )
     parser.add_argument("--device", default=None, help="learner device, e.g. cpu or cuda (default cpu)")
     parser.add_argument(
         "--torch-threads", type=int, default=1, help="torch intra-op threads (default 1: leaves the cores to MuJoCo)"
@@ -475,10 +530,14 @@ def build_parser() -> argparse.ArgumentParser:
 def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
     """(spec, run directory, resume) from parsed arguments."""
     if args.resume is not None:
+        if args.init_from is not None:
+            raise ValueError("--init-from starts a new run; --resume continues one from its own checkpoint: give one")
         spec = load_spec(args.resume)
         changes = {k: v for k, v in (("total_steps", args.total_steps), ("device", args.device)) if v is not None}
         if changes:
             spec = TrainSpec.from_json({**spec.to_json(), **changes})
+        if spec.init_from is not None and latest_checkpoint(args.resume) is None:  # stopped before its first one
+            check_init_from(spec.init_from, spec.backend)
         return spec, args.resume, True
     env_id = args.env or DEFAULT_ENV
     backend = args.backend or default_backend(env_id)
@@ -488,9 +547,12 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         "total_steps": args.total_steps or DEFAULT_TOTAL_STEPS,
         "checkpoint_every": args.checkpoint_every or DEFAULT_CHECKPOINT_EVERY,
         "device": args.device or "cpu",
+        "init_from": args.init_from,
     }
     overrides = cli.with_training_defaults(env_id, cli.env_overrides(args))
     spec = make_spec(env_id, backend, overrides, parse_assignments(args.ppo_option, "--ppo-option"), **run)
+    if spec.init_from is not None:
+        check_init_from(spec.init_from, spec.backend)
     run_dir = args.run_dir or args.runs_root / run_name(env_id, backend, spec.target.margin_weight, spec.seed)
     return spec, run_dir, False
 

@@ -7,9 +7,10 @@ Usage:
 Each run directory holds ``config.json`` (``margin_rl.train.train``) and ``<eval>/metrics.json``
 (``python -m margin_rl.train.evaluate RUN/final_model.pt --episodes 64 --seed 5000 --out RUN/<eval>``). Run
 directories are never committed; this keeps, per run, the settings that define it (environment, margin
-weight, seed, steps, weights' sha256, acceleration filter) and the evaluation's per-metric mean and std, then
-groups the runs by margin weight (mean ± std over seeds, and the number of seeds) and compares every other
-weight with weight 0 over the seeds (``"versus_baseline"``: difference, bootstrap interval and Welch test of
+weight, seed, steps, weights' sha256, acceleration filter, warm start) and the evaluation's per-metric mean and
+std with the environment it ran in (``evaluate --env`` may differ from the training one), then groups the runs
+by margin weight (mean ± std over seeds, and the number of seeds) and compares every other weight with weight 0
+over the seeds (``"versus_baseline"``: difference, bootstrap interval and Welch test of
 :func:`margin_rl.train.significance.compare_seeds`; printed as a second table).
 """
 
@@ -55,7 +56,12 @@ def run_summary(run: Path, eval_name: str) -> dict[str, object]:
         "acceleration_filter": env.get("acceleration_filter"),
         "alive_bonus": env.get("alive_bonus"),
         "knee_clearance": env.get("knee_clearance", 0.0),
-        "evaluation": {"episodes": metrics.get("episodes"), "seed": metrics.get("seed")},
+        "init_from": config.get("init_from"),  # warm start (train --init-from), None: trained from scratch
+        "evaluation": {
+            "episodes": metrics.get("episodes"),
+            "seed": metrics.get("seed"),
+            "env_id": metrics.get("env_id"),
+        },
         "metrics": {k: metrics["summary"][k] for k in METRICS if k in metrics["summary"]},
     }
 

@@ -137,7 +137,8 @@ def check_terrain_config(config: TerrainConfig) -> None:
     """Check a :class:`TerrainConfig`; :class:`EnvConfig` calls it (terrain.py is imported by this module, so
     it cannot import these checks back without an import cycle)."""
     where = "TerrainConfig"
-    check_number(f"{where}.size", config.size, minimum=0.0, min_open=True, hint="side of the square terrain [m]")
+    check_number(f"{where}.size", config.size, minimum=0.0, min_open=True, hint="side of the square of tiles [m]")
+    check_number(f"{where}.border", config.border, minimum=0.0, hint="flat ground around the tiles [m]")
     check_number(f"{where}.resolution", config.resolution, minimum=0.0, min_open=True, hint="grid spacing [m]")
     check_number(f"{where}.tile", config.tile, minimum=0.0, min_open=True, hint="side of one tile [m]")
     check_range_pair(f"{where}.step_height", config.step_height, minimum=0.0, hint="[m]")
@@ -154,21 +155,23 @@ def check_terrain_config(config: TerrainConfig) -> None:
         hint="vertical extent of the heightfield [m], above base_level",
     )
     # The generator lays whole tiles of whole grid cells; other ratios would not fill the grid.
-    for name, outer, inner in (
-        ("size / tile", config.size, config.tile),
-        ("tile / resolution", config.tile, config.resolution),
+    for name, outer, inner, least in (
+        ("size / tile", config.size, config.tile, 1),
+        ("tile / resolution", config.tile, config.resolution, 1),
+        ("border / resolution", config.border, config.resolution, 0),
     ):
         ratio = outer / inner
-        if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio):
+        if round(ratio) < least or abs(ratio - round(ratio)) > 1e-6 * max(1.0, ratio):
             raise ValueError(
-                f"{where}: {name} must be a whole number >= 1 (the terrain is whole tiles of whole grid cells), "
-                f"got size={config.size}, tile={config.tile}, resolution={config.resolution}"
+                f"{where}: {name} must be a whole number >= {least} (the terrain is whole tiles of whole grid cells), "
+                f"got size={config.size}, tile={config.tile}, border={config.border}, resolution={config.resolution}"
             )
-    side = round(config.size / config.resolution) + 1
+    side = round((config.size + 2 * config.border) / config.resolution) + 1
     if side > MAX_TERRAIN_GRID_SIDE:
         raise ValueError(
-            f"{where}: size / resolution gives a {side} x {side} heightfield, more than {MAX_TERRAIN_GRID_SIDE} "
-            f"per side; use a coarser resolution or a smaller size (lengths are in metres)"
+            f"{where}: (size + 2 border) / resolution gives a {side} x {side} heightfield, more than "
+            f"{MAX_TERRAIN_GRID_SIDE} per side; use a coarser resolution, a smaller size or border (lengths are in "
+            "metres)"
         )
 
 

@@ -1,0 +1,85 @@
+"""The rough terrain: walkable everywhere (no jump above one step), flat pads at the spawn points, deterministic."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from margin_rl.envs.terrain import TILE_TYPES, TerrainConfig, rough_terrain
+
+# 3 x 3 tiles of 4 m: every tile type appears (8 types, 9 tiles), on a 241 x 241 grid that builds in milliseconds.
+SMALL = {"size": 12.0, "tile": 4.0, "border": 0.0}
+
+
+def _largest_neighbour_jump(heights: np.ndarray) -> float:
+    """Largest height difference [m] between grid nodes one cell apart, along rows or columns."""
+    return float(max(np.abs(np.diff(heights, axis=0)).max(), np.abs(np.diff(heights, axis=1)).max()))
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    seed=st.integers(0, 2**31 - 1),
+    low=st.floats(0.0, 0.2),
+    spread=st.floats(0.0, 0.1),
+    max_slope_deg=st.floats(5.0, 30.0),
+)
+def test_no_jump_is_higher_than_one_step(seed: int, low: float, spread: float, max_slope_deg: float) -> None:
+    """Stairs and inclines rise from the border to the pad and back: a robot crossing tiles never meets a wall.
+
+    The bound: one step (step_height's upper bound), or an incline's rise over one grid cell when that is larger.
+    """
+    config = TerrainConfig(**SMALL, step_height=(low, low + spread), max_slope_deg=max_slope_deg)
+    terrain = rough_terrain(config, seed)
+    bound = max(low + spread, np.tan(np.deg2rad(max_slope_deg)) * config.resolution)
+    assert _largest_neighbour_jump(terrain.heights) <= bound + 1e-9
+
+
+def test_tile_borders_are_at_the_base_level_and_stairs_are_pyramids() -> None:
+    config = TerrainConfig(**SMALL)
+    terrain = rough_terrain(config, seed=7)
+    per_tile = round(config.tile / config.resolution)
+    borders = terrain.heights[::per_tile, :], terrain.heights[:, ::per_tile]
+    for border in borders:
+        np.testing.assert_allclose(border, config.base_level)
+    # The highest pad is a stairs_up or slope_up top, well above a single step: the pyramids are there.
+    assert terrain.spawn_points[:, 2].max() > config.base_level + config.step_height[1]
+
+
+def test_pads_are_flat_and_spawn_points_sit_on_them() -> None:
+    config = TerrainConfig(**SMALL)
+    terrain = rough_terrain(config, seed=11)
+    np.testing.assert_allclose(terrain.height(terrain.spawn_points[:, :2]), terrain.spawn_points[:, 2], atol=1e-12)
+    offsets = np.linspace(-config.pad / 2, config.pad / 2, 5)
+    for x, y, z in terrain.spawn_points:
+        around = np.array([(x + dx, y + dy) for dx in offsets for dy in offsets])
+        np.testing.assert_allclose(terrain.height(around), z, atol=1e-12)
+        np.testing.assert_allclose(terrain.normal(np.array([[x, y]])), [[0.0, 0.0, 1.0]], atol=1e-12)
+
+
+def test_a_flat_border_holds_every_episode_walk() -> None:
+    """Default settings: from any spawn pad, a whole episode at the default command stays on the heightfield."""
+    from margin_rl.envs.config import EnvConfig
+
+    env = EnvConfig(terrain="rough")
+    config = env.terrain_config
+    terrain = rough_terrain(config, seed=0)
+    n = terrain.heights.shape[0]
+    extent = (n - 1) * config.resolution
+    assert extent == pytest.approx(config.size + 2 * config.border)
+    walk = env.episode_length_s * max(abs(v) for v in env.command.forward_velocity)  # 15 m
+    to_edge = extent / 2 - np.abs(terrain.spawn_points[:, :2]).max()
+    assert to_edge >= walk
+    margin = round(config.border / config.resolution)
+    ring = np.ones((n, n), bool)
+    ring[margin : n - margin, margin : n - margin] = False
+    np.testing.assert_array_equal(terrain.heights[ring], config.base_level)
+
+
+def test_same_seed_same_grid_and_every_tile_type_used() -> None:
+    config = TerrainConfig(**SMALL)
+    a, b = rough_terrain(config, seed=5), rough_terrain(config, seed=5)
+    np.testing.assert_array_equal(a.heights, b.heights)
+    assert not np.array_equal(a.heights, rough_terrain(config, seed=6).heights)
+    assert len(a.spawn_points) == 9 >= len(TILE_TYPES)

@@ -160,7 +160,10 @@ def main() -> None:
         if args.json is None:
             parser.error("--merge needs --json")
         records = [r for path in args.merge for r in read_json(path)["runs"]]
-        episodes = {read_json(path)["episodes"] for path in args.merge}
+        episodes: set[int] = set()
+        for path in args.merge:  # an int per --from-run file, a list per file merged before (merging is repeatable)
+            value = read_json(path)["episodes"]
+            episodes.update(value if isinstance(value, list) else [value])
         write_json(
             args.json, {"episodes": sorted(episodes), "runs": records, "by_margin_weight": summarise_by_weight(records)}
         )

@@ -135,7 +135,7 @@ def rough_terrain(config: TerrainConfig, seed: int) -> Terrain:
 def _tile(kind: str, m: int, res: float, config: TerrainConfig, rng: np.random.Generator) -> np.ndarray:
     """Height offsets (m, m) of one tile relative to the base level, with a flat pad at the centre.
 
-    Stairs and inclines are square pyramids in the Chebyshev distance from the tile centre: 0 on the border, the pad
+    Stairs and inclines are square pyramids in the Chebyshev distance from the tile centre: 0 on the rim, the pad
     at the top (``*_up``) or the bottom (``*_down``); one stair is ``width`` deep and one ``step`` high.
     """
     lo, hi = config.step_height
@@ -154,7 +154,7 @@ def _tile(kind: str, m: int, res: float, config: TerrainConfig, rng: np.random.G
         out = values[cells]
     elif kind in ("stairs_up", "stairs_down"):
         step, width = rng.uniform(lo, hi), 0.3
-        stairs = math.ceil(to_border / width)  # the last stair ends at the border
+        stairs = math.ceil(to_border / width)  # the last (possibly narrower) stair ends at the rim
         below_pad = np.minimum(np.ceil(from_pad / width), stairs)  # stairs between a node and the pad
         out = (stairs - below_pad) * step * (1 if kind == "stairs_up" else -1)
         pad_offset = stairs * step * (1 if kind == "stairs_up" else -1)

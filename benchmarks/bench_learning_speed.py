@@ -159,10 +159,10 @@ def main() -> None:
     if args.merge is not None:
         if args.json is None:
             parser.error("--merge needs --json")
-        records = [r for path in args.merge for r in read_json(path)["runs"]]
-        episodes: set[int] = set()
-        for path in args.merge:  # an int per --from-run file, a list per file merged before (merging is repeatable)
-            value = read_json(path)["episodes"]
+        records, episodes = [], set()
+        for record in map(read_json, args.merge):
+            records.extend(record["runs"])
+            value = record["episodes"]  # an int per --from-run file, a list per file merged before (repeatable)
             episodes.update(value if isinstance(value, list) else [value])
         write_json(
             args.json, {"episodes": sorted(episodes), "runs": records, "by_margin_weight": summarise_by_weight(records)}

@@ -153,6 +153,19 @@ class TrainingStopped(Exception):  # noqa: N818 - a control-flow signal, not an 
     """Raised at an iteration boundary after a stop request, once the checkpoint is written."""
 
 
+def _load_checkpoint(path: Path, not_ours: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(saved dict, its ``infos``) of a checkpoint written by :meth:`CheckpointingRunner.save` (``weights_only``).
+
+    Raises:
+        ValueError: ``not_ours`` with the format found, when the file is not such a checkpoint.
+    """
+    loaded = torch.load(path, map_location="cpu", weights_only=True)
+    infos = loaded.get("infos") or {}
+    if infos.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{not_ours} (format {infos.get('format')!r})")
+    return loaded, infos
+
+
 class CheckpointingRunner(OnPolicyRunner):
     """rsl-rl's OnPolicyRunner writing atomic, self-describing checkpoints (see the module docstring)."""
 
@@ -166,6 +179,11 @@ class CheckpointingRunner(OnPolicyRunner):
         self.steps_per_iteration = env.num_envs * int(train_cfg["num_steps_per_env"])
         self._logger_log = self.logger.log
         self.logger.log = self._after_iteration  # the runner calls this once per iteration, after the update
+
+    @property
+    def obs_dim(self) -> int:
+        """Size of the policy observation of this run's environment."""
+        return int(self.adapter.get_observations()["policy"].shape[-1])
 
     @property
     def env_steps(self) -> int:
@@ -193,7 +211,7 @@ class CheckpointingRunner(OnPolicyRunner):
             "env_steps": self.env_steps,
             "elapsed_s": float(self.logger.tot_time),
             "train_cfg": copy.deepcopy(self.cfg),
-            "obs_dim": int(self.adapter.get_observations()["policy"].shape[-1]),
+            "obs_dim": self.obs_dim,
             "num_actions": int(self.adapter.num_actions),
             "torch_rng_state": torch.get_rng_state(),
             "numpy_rng_state": self.adapter.core.rng.bit_generator.state,
@@ -209,10 +227,7 @@ class CheckpointingRunner(OnPolicyRunner):
 
     def restore(self, path: Path) -> None:
         """Continue from a checkpoint of :meth:`save` (loaded with ``weights_only=True``)."""
-        loaded = torch.load(path, map_location="cpu", weights_only=True)
-        infos = loaded.get("infos") or {}
-        if infos.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"{path}: not a margin_rl rsl-rl training checkpoint (format {infos.get('format')!r})")
+        loaded, infos = _load_checkpoint(path, f"{path}: not a margin_rl rsl-rl training checkpoint")
         self.alg.load(loaded, None, strict=True)
         self.completed_iterations = int(infos["completed_iterations"])
         self.current_learning_iteration = self.completed_iterations
@@ -231,13 +246,9 @@ class CheckpointingRunner(OnPolicyRunner):
         Raises:
             ValueError: not a margin_rl rsl-rl model, or sizes or network shapes that differ from this run's.
         """
-        loaded = torch.load(path, map_location="cpu", weights_only=True)
-        infos = loaded.get("infos") or {}
-        if infos.get("format") != CHECKPOINT_FORMAT:
-            raise ValueError(f"--init-from {path}: not a margin_rl rsl-rl model (format {infos.get('format')!r})")
-        obs_dim = int(self.adapter.get_observations()["policy"].shape[-1])
+        loaded, infos = _load_checkpoint(path, f"--init-from {path}: not a margin_rl rsl-rl model")
         sizes = {
-            "observation": (int(infos["obs_dim"]), obs_dim),
+            "observation": (int(infos["obs_dim"]), self.obs_dim),
             "action": (int(infos["num_actions"]), int(self.adapter.num_actions)),
         }
         for name, (theirs, ours) in sizes.items():

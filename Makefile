@@ -42,8 +42,8 @@ install: $(STAMP)
 DEMO_BUNDLES ?= anymal_b anymal_c
 demo: install
 	@for bundle in $(DEMO_BUNDLES); do \
-	  $(PY) -m margin_rl.train.compare --bundled $$bundle --out results/$$bundle || exit 1; \
-	  $(PY) -m margin_rl.train.push_recovery --bundled $$bundle --episodes 8 --forward-velocities 0.75 \
+	  $(PY) -m margin_rl.train compare --bundled $$bundle --out results/$$bundle || exit 1; \
+	  $(PY) -m margin_rl.train push-recovery --bundled $$bundle --episodes 8 --forward-velocities 0.75 \
 	    --out results/$$bundle || exit 1; \
 	done
 

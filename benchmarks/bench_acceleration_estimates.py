@@ -34,8 +34,8 @@ from margin_rl.envs.anymal import AnymalEnv
 from margin_rl.envs.core import MARGIN_CLIP
 from margin_rl.envs.stability_input import stability_state_from_simulation
 from margin_rl.stability import LearnedMargin, TableI, analytic_margin
-from margin_rl.train.bundle import load_bundle
-from margin_rl.train.policies import load_policy
+from margin_rl.train.artifacts.bundle import load_bundle
+from margin_rl.train.artifacts.policies import load_policy
 
 ESTIMATORS = ("finite_difference", "instantaneous", "ema")
 GRAVITY = np.array([0.0, 0.0, -9.81])

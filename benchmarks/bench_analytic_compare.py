@@ -29,9 +29,9 @@ from typing import Any
 import numpy as np
 
 from margin_rl import load_robot
-from margin_rl.stability.analytic import analytic_margin
-from margin_rl.stability.lambda_state import from_lambda
-from margin_rl.stability.sampling import sample_states
+from margin_rl.stability.analytic.lambda_state import from_lambda
+from margin_rl.stability.analytic.margin import analytic_margin
+from margin_rl.stability.analytic.sampling import sample_states
 
 
 def _is_ours(module_name: str) -> bool:
@@ -52,7 +52,7 @@ def load_baseline(src: Path, robot_name: str) -> tuple[Any, Callable[..., Any]]:
     sys.path.insert(0, str(src))
     try:
         robot_module = importlib.import_module("margin_rl.robot")
-        analytic_module = importlib.import_module("margin_rl.stability.analytic")
+        analytic_module = importlib.import_module("margin_rl.stability.analytic.margin")
         if not Path(analytic_module.__file__ or "").resolve().is_relative_to(src.resolve()):
             raise SystemExit(f"--baseline {src}: imported {analytic_module.__file__} instead")
         robot = robot_module.load_robot(robot_name)

@@ -17,9 +17,9 @@ import time
 import numpy as np
 
 from margin_rl import load_robot
-from margin_rl.stability.analytic import AnalyticSettings, analytic_margin
-from margin_rl.stability.lambda_state import from_lambda
-from margin_rl.stability.sampling import sample_states
+from margin_rl.stability.analytic.lambda_state import from_lambda
+from margin_rl.stability.analytic.margin import AnalyticSettings, analytic_margin
+from margin_rl.stability.analytic.sampling import sample_states
 
 
 def main() -> None:

@@ -27,8 +27,13 @@ from pathlib import Path
 import numpy as np
 
 from margin_rl import load_robot
-from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch
-from margin_rl.stability.extended import DEFAULT_BISECTION_STEPS, SOURCES, extended_margin_batch, scale_dynamic_load
+from margin_rl.stability.analytic.extended import (
+    DEFAULT_BISECTION_STEPS,
+    SOURCES,
+    extended_margin_batch,
+    scale_dynamic_load,
+)
+from margin_rl.stability.analytic.margin import STATUSES, AnalyticSettings, analytic_margin_batch
 
 FLOOR = -0.5  # the environment's clip floor: what a state without m_a was rated before m_x
 

@@ -23,7 +23,7 @@ or the time limit (no autoreset). Measured, per variant (mean ± std over the po
   and non-falling episodes and in the last ``--window`` s before falls;
 * margins: on a subsample of the visited lambdas (every ``--every``-th step, plus every step of the last
   ``--window`` s before each fall) the learned margin (unclipped) against the extended margin m_x and the
-  analytic margin m_a (:func:`margin_rl.stability.extended.extended_margin_batch`): how often the learned
+  analytic margin m_a (:func:`margin_rl.stability.analytic.extended.extended_margin_batch`): how often the learned
   margin is positive where m_x is negative, or where m_a is negative or undefined (no Feasible Region);
 * posture probe: on ``--probe-states`` steady states per policy, the change of the learned margin and of m_x when
   lambda's CoM is put 5 cm lower over the same feet, or the stance 5 cm wider.
@@ -50,13 +50,13 @@ import numpy as np
 
 from margin_rl.envs.core import MARGIN_CLIP, AnymalCore, SimulationState
 from margin_rl.robot import load_robot
-from margin_rl.stability.analytic import STATUSES
-from margin_rl.stability.extended import extended_margin_batch
-from margin_rl.stability.lambda_state import LAMBDA_SLICES
-from margin_rl.stability.learned import LearnedMargin
-from margin_rl.train.bundle import Bundle, BundledRun, load_bundle
-from margin_rl.train.evaluate import DEFAULT_FORWARD_VELOCITY, evaluation_config, resolve_env
-from margin_rl.train.policies import load_policy
+from margin_rl.stability.analytic.extended import extended_margin_batch
+from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES
+from margin_rl.stability.analytic.margin import STATUSES
+from margin_rl.stability.learned.model import LearnedMargin
+from margin_rl.train.artifacts.bundle import Bundle, BundledRun, load_bundle
+from margin_rl.train.artifacts.policies import load_policy
+from margin_rl.train.commands.evaluate import DEFAULT_FORWARD_VELOCITY, evaluation_config, resolve_env
 from margin_rl.train.runs import torch_threads
 
 CAUSES: tuple[str, ...] = ("base_contact", "thigh_contact", "base_too_low", "tilted", "diverged")

@@ -1,4 +1,4 @@
-"""Benchmark of :func:`margin_rl.stability.region.feasible_region`.
+"""Benchmark of :func:`margin_rl.stability.geometry.region.feasible_region`.
 
 Times whole calls (validation, problem set-up, all conic programs and the polygon clean-up) on
 synthetic quadruped states from ``tests/stability/cases.py``: random foot placements, tilted
@@ -31,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from margin_rl.stability import region as fr  # noqa: E402
+from margin_rl.stability.geometry import region as fr  # noqa: E402
 from tests.stability import cases  # noqa: E402
 
 STANCES: dict[int, list[tuple[bool, bool, bool, bool]]] = {

@@ -1,4 +1,4 @@
-"""Benchmark of the Feasible Wrench Polytope criterion (:mod:`margin_rl.stability.fwp`) vs seed 004.
+"""Benchmark of the Feasible Wrench Polytope criterion (:mod:`margin_rl.stability.fwp.feasibility`) vs seed 004.
 
 For 3 and 4 non-coplanar contacts of ANYmal C (feet at different heights, tilted terrain normals,
 static state; ``--states`` random variations of that stance), prints a Markdown table with the vertex
@@ -41,14 +41,14 @@ sys.path.insert(0, str(ROOT))
 
 from margin_rl import load_robot  # noqa: E402
 from margin_rl.robot import Robot  # noqa: E402
-from margin_rl.stability.analytic import ContactProblem, contact_problem  # noqa: E402
-from margin_rl.stability.fwp import (  # noqa: E402
+from margin_rl.stability.analytic.margin import ContactProblem, contact_problem  # noqa: E402
+from margin_rl.stability.analytic.sampling import nominal_feet, standing_state  # noqa: E402
+from margin_rl.stability.fwp.feasibility import (  # noqa: E402
     contact_problem_polytope,
     feasibility_factor,
     fwp_feasibility,
     minkowski_feasibility_factor,
 )
-from margin_rl.stability.sampling import nominal_feet, standing_state  # noqa: E402
 
 PAPER = {  # Table I (LP) and Table II (Politopix V-description), HyQ
     3: {"vertices": 436, "variables": 437, "v_descr_ms": 150.0, "lp_ms": 90.0},

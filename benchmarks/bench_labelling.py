@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from margin_rl.stability.analytic import STATUSES, AnalyticSettings, analytic_margin_batch, worker_robot
-from margin_rl.stability.dataset import DatasetSpec, generate
-from margin_rl.stability.sampling import sample_states
+from margin_rl.stability.analytic.margin import STATUSES, AnalyticSettings, analytic_margin_batch, worker_robot
+from margin_rl.stability.analytic.sampling import sample_states
+from margin_rl.stability.learned.dataset import DatasetSpec, generate
 
 PATHS = {"per_state": AnalyticSettings(labelling="per_state"), "batched": AnalyticSettings(labelling="batched")}
 

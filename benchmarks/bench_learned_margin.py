@@ -17,9 +17,9 @@ import numpy as np
 import torch
 
 from margin_rl import load_robot
-from margin_rl.stability.analytic import analytic_margin
-from margin_rl.stability.learned import LearnedMargin
-from margin_rl.stability.sampling import sample_states
+from margin_rl.stability.analytic.margin import analytic_margin
+from margin_rl.stability.analytic.sampling import sample_states
+from margin_rl.stability.learned.model import LearnedMargin
 
 
 def per_call(fn, repeats: int) -> float:

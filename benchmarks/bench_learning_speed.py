@@ -8,7 +8,8 @@ Usage:
     python benchmarks/bench_learning_speed.py [--env margin_rl/AnymalB-v0] [--backend rsl] [--margin-weight 0]
         [--seed 0] [--num-envs 128] [--total-steps 6000000] [--eval-every 500000] [--episodes 16] [--out DIR]
 
-One training run (``margin_rl.train.train.train``, exactly what ``margin-rl-train`` runs) writes a checkpoint every
+One training run (``margin_rl.train.commands.train.train``, exactly what ``margin-rl-train`` runs) writes a
+checkpoint every
 ``--eval-every`` steps; the wall time of each checkpoint since the start of training is recorded when it is
 written. After training (so evaluation never counts as training time) every checkpoint is evaluated on
 ``--episodes`` deterministic 20 s episodes from evaluation seed 1000 at 0.75 m/s, and the table (steps, minutes,
@@ -37,7 +38,7 @@ TIME_TARGET_MIN = 10.0  # issue 17
 
 def train_with_timeline(args: argparse.Namespace, run_dir: Path) -> list[tuple[int, float, Path]]:
     """Train one run; returns [(env steps, seconds since training started, checkpoint)] per checkpoint."""
-    from margin_rl.train.train import make_spec, train
+    from margin_rl.train.commands.train import make_spec, train
 
     margin = {"margin_weight": args.margin_weight, "margin": "learned" if args.margin_weight > 0 else "none"}
     spec = make_spec(
@@ -79,7 +80,7 @@ def evaluate_timeline(
     timeline: list[tuple[int, float, Path]], episodes: int, time_target_min: float = TIME_TARGET_MIN
 ) -> list[dict[str, float]]:
     """Deterministic evaluation of every checkpoint: velocity error and fall fraction."""
-    from margin_rl.train.evaluate import evaluate
+    from margin_rl.train.commands.evaluate import evaluate
 
     rows = []
     for steps, seconds, path in timeline:

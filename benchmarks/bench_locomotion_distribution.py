@@ -28,9 +28,9 @@ import numpy as np
 import margin_rl
 from margin_rl.envs.config import CommandConfig, RandomizationConfig
 from margin_rl.stability import TableI, from_lambda, lambda_names
-from margin_rl.stability.sampling import nominal_feet
-from margin_rl.train.bundle import load_bundle
-from margin_rl.train.policies import load_policy
+from margin_rl.stability.analytic.sampling import nominal_feet
+from margin_rl.train.artifacts.bundle import load_bundle
+from margin_rl.train.artifacts.policies import load_policy
 
 CONDITIONS: dict[str, tuple[str, dict]] = {
     "flat, 0.75 m/s": ("{robot}-v0", {}),

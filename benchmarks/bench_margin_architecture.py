@@ -23,12 +23,12 @@ import numpy as np
 import torch
 
 from margin_rl.robot import load_robot
-from margin_rl.stability.dataset import load_dataset
-from margin_rl.stability.evaluation import reliability
-from margin_rl.stability.features import PROXY_INDEX, PhysicsConstants, physics_features
-from margin_rl.stability.learned import LearnedMargin
-from margin_rl.stability.mlp_weights import architecture_widths
-from margin_rl.stability.training import (
+from margin_rl.stability.learned.dataset import load_dataset
+from margin_rl.stability.learned.evaluation import reliability
+from margin_rl.stability.learned.features import PROXY_INDEX, PhysicsConstants, physics_features
+from margin_rl.stability.learned.mlp_weights import architecture_widths
+from margin_rl.stability.learned.model import LearnedMargin
+from margin_rl.stability.learned.training import (
     TrainConfig,
     build_model,
     fit,

@@ -24,9 +24,16 @@ import time
 import numpy as np
 import torch
 
-from margin_rl.stability.dataset import load_dataset
-from margin_rl.stability.lambda_state import LAMBDA_DIM
-from margin_rl.stability.training import TrainConfig, build_model, check_config, fit, mean_squared_error, split_indices
+from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM
+from margin_rl.stability.learned.dataset import load_dataset
+from margin_rl.stability.learned.training import (
+    TrainConfig,
+    build_model,
+    check_config,
+    fit,
+    mean_squared_error,
+    split_indices,
+)
 
 
 def parse_widths(text: str) -> tuple[int, ...]:

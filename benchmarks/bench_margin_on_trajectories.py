@@ -21,12 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from margin_rl.stability.analytic import STATUSES, analytic_margin_batch
-from margin_rl.stability.lambda_state import lambda_names
-from margin_rl.stability.learned import LearnedMargin
-from margin_rl.train.bundle import load_bundle
-from margin_rl.train.evaluate import evaluation_config, resolve_env
-from margin_rl.train.policies import load_policy
+from margin_rl.stability.analytic.lambda_state import lambda_names
+from margin_rl.stability.analytic.margin import STATUSES, analytic_margin_batch
+from margin_rl.stability.learned.model import LearnedMargin
+from margin_rl.train.artifacts.bundle import load_bundle
+from margin_rl.train.artifacts.policies import load_policy
+from margin_rl.train.commands.evaluate import evaluation_config, resolve_env
 
 
 def visited_states(

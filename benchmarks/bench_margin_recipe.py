@@ -7,7 +7,7 @@ Usage:
         --recipe '{"epochs": 15}' --recipe '{"epochs": 15, "mirror": "augment"}' \\
         --recipe '{"epochs": 15, "mirror": "tied"}'
 
-Each ``--recipe`` is a JSON object of :class:`margin_rl.stability.training.TrainConfig` fields on top of the
+Each ``--recipe`` is a JSON object of :class:`margin_rl.stability.learned.training.TrainConfig` fields on top of the
 defaults. Every recipe trains a fresh paper-size MLP on the same seeded split of the first ``--max-samples``
 ``ok`` samples and reports its best validation RMSE and the wall time, as a Markdown table. Only the
 ranking of recipes on one machine state is meaningful: the wall time depends on the load.
@@ -23,8 +23,15 @@ import time
 import numpy as np
 import torch
 
-from margin_rl.stability.dataset import load_dataset
-from margin_rl.stability.training import TrainConfig, build_model, check_config, fit, split_indices, training_split
+from margin_rl.stability.learned.dataset import load_dataset
+from margin_rl.stability.learned.training import (
+    TrainConfig,
+    build_model,
+    check_config,
+    fit,
+    split_indices,
+    training_split,
+)
 
 
 def parse_recipe(text: str) -> TrainConfig:

@@ -12,7 +12,8 @@ Usage:
         --weights anymal_b --weights data/w_v2_rollouts_b.npz ...
 
 ``evaluate`` labels the held-out states with the analytic margin m_a and the extended margin m_x
-(:mod:`margin_rl.stability.extended`; cached beside the test file) and prints, per weights file, the RMSE, median
+(:mod:`margin_rl.stability.analytic.extended`; cached beside the test file) and prints, per weights file, the RMSE,
+median
 absolute error and sign agreement against m_a on the ``ok`` states and against m_x on every state that has one,
 and the share of states outside that network's training ranges.
 """
@@ -26,7 +27,7 @@ import numpy as np
 
 from margin_rl import load_robot
 from margin_rl.stability import STATUSES, LearnedMargin
-from margin_rl.stability.extended import extended_margin_batch
+from margin_rl.stability.analytic.extended import extended_margin_batch
 
 
 def split(states: Path, policies: int, block: int, train: Path, test: Path, held_out: int = -1) -> None:

@@ -3,7 +3,7 @@
 Usage:
     python benchmarks/bench_margin_symmetry.py --robot anymal_c --n 6000 [--weights path/to/weights.npz ...]
 
-For every state lambda and its mirror image M lambda (:func:`margin_rl.stability.lambda_state.mirror_lambda`)
+For every state lambda and its mirror image M lambda (:func:`margin_rl.stability.analytic.lambda_state.mirror_lambda`)
 it reports, as a Markdown table:
 
 * the analytic asymmetry |m_a(M lambda) - m_a(lambda)| (zero for a symmetric robot, up to the focus bracket);
@@ -19,10 +19,10 @@ import argparse
 import numpy as np
 
 from margin_rl.robot import load_robot
-from margin_rl.stability.analytic import STATUSES, analytic_margin_batch
-from margin_rl.stability.lambda_state import mirror_lambda
-from margin_rl.stability.learned import LearnedMargin
-from margin_rl.stability.sampling import sample_states
+from margin_rl.stability.analytic.lambda_state import mirror_lambda
+from margin_rl.stability.analytic.margin import STATUSES, analytic_margin_batch
+from margin_rl.stability.analytic.sampling import sample_states
+from margin_rl.stability.learned.model import LearnedMargin
 
 
 def rmse_cm(error: np.ndarray) -> float:

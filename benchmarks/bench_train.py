@@ -38,7 +38,7 @@ def steady_fps(run_dir: Path) -> float:
 
 
 def measure(env_id: str, backend: str, num_envs: int, steps: int, margin: dict[str, object], device: str) -> tuple:
-    from margin_rl.train.train import make_spec, train
+    from margin_rl.train.commands.train import make_spec, train
 
     spec = make_spec(
         env_id,

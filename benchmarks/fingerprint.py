@@ -139,7 +139,7 @@ def _run(args: list[str], cwd: Path) -> None:
 
 def cli_fingerprints(work: Path) -> dict[str, str]:
     out = {}
-    _run(["-m", "margin_rl.train.compare", "--bundled", "anymal_b", "--out", str(work / "demo")], work)
+    _run(["-m", "margin_rl.train", "compare", "--bundled", "anymal_b", "--out", str(work / "demo")], work)
     report = json.loads((work / "demo" / "compare.json").read_text())
     for key in ("provenance", "wall_time_s", "command"):
         report.pop(key, None)
@@ -150,7 +150,7 @@ def cli_fingerprints(work: Path) -> dict[str, str]:
     from margin_rl.robot import load_robot  # noqa: F401 - fail early if the package is broken
 
     data = work / "data"
-    module = "margin_rl.stability.dataset"
+    module = "margin_rl.stability.learned.dataset"
     try:
         __import__(module)
     except ImportError:
@@ -164,7 +164,7 @@ def cli_fingerprints(work: Path) -> dict[str, str]:
             out[f"dataset/{shard.name}"] = digest(*(z[k] for k in sorted(z.files) if k != "seconds"))
     for backend, extra in (("rsl", []), ("sb3", ["--ppo-option", "n_steps=64"])):
         run_dir = work / f"train_{backend}"
-        _run(["-m", "margin_rl.train.train", "--env", "margin_rl/AnymalB-v0", "--backend", backend, "--seed", "1",
+        _run(["-m", "margin_rl.train", "train", "--env", "margin_rl/AnymalB-v0", "--backend", backend, "--seed", "1",
               "--num-envs", "8", "--total-steps", "1024", "--margin-weight", "0.2", "--env-option", "alive_bonus=0",
               "--run-dir", str(run_dir), "--no-progress", *extra], work)
         import torch

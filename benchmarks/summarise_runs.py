@@ -4,14 +4,14 @@ Usage:
     python benchmarks/summarise_runs.py runs/v2_sweep/b_mw*_s* --eval eval5000 \
         --json docs/comparison/v2_sweep_anymal_b.json
 
-Each run directory holds ``config.json`` (``margin_rl.train.train``) and ``<eval>/metrics.json``
-(``python -m margin_rl.train.evaluate RUN/final_model.pt --episodes 64 --seed 5000 --out RUN/<eval>``). Run
+Each run directory holds ``config.json`` (``margin_rl.train.commands.train``) and ``<eval>/metrics.json``
+(``python -m margin_rl.train evaluate RUN/final_model.pt --episodes 64 --seed 5000 --out RUN/<eval>``). Run
 directories are never committed; this keeps, per run, the settings that define it (environment, margin
 weight, seed, steps, weights' sha256, acceleration filter, warm start) and the evaluation's per-metric mean and
 std with the environment it ran in (``evaluate --env`` may differ from the training one), then groups the runs
 by margin weight (mean ± std over seeds, and the number of seeds) and compares every other weight with weight 0
 over the seeds (``"versus_baseline"``: difference, bootstrap interval and Welch test of
-:func:`margin_rl.train.significance.compare_seeds`; printed as a second table).
+:func:`margin_rl.train.analysis.significance.compare_seeds`; printed as a second table).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from margin_rl.train.significance import compare_seeds, difference_table
+from margin_rl.train.analysis.significance import compare_seeds, difference_table
 
 METRICS = (
     "fell",
@@ -90,7 +90,7 @@ def by_weight(runs: list[dict[str, object]]) -> dict[str, dict[str, object]]:
 
 def versus_baseline(runs: list[dict[str, object]]) -> dict[str, dict[str, dict[str, object]]]:
     """Per margin weight other than 0: each metric against weight 0 over the seeds (the runs' episode means),
-    as :class:`~margin_rl.train.significance.Difference` dicts; empty without runs at weight 0."""
+    as :class:`~margin_rl.train.analysis.significance.Difference` dicts; empty without runs at weight 0."""
     groups = weight_groups(runs)
     baseline = [r for weight, members in groups if float(weight) == 0 for r in members]
     if not baseline:

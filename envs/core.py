@@ -52,7 +52,7 @@ from margin_rl.envs.stability_input import (
 )
 from margin_rl.envs.terrain import flat_terrain, rough_terrain
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
-from margin_rl.stability.lambda_state import LAMBDA_DIM, StabilityState
+from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, StabilityState
 
 __all__ = [
     "MARGIN_CLIP",

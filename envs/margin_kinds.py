@@ -5,7 +5,7 @@
 lambda (N, 47) to a margin (N,) in its own unit; states for which a per-state criterion has no value get
 ``floor``, the lower end of the environment's clip.
 
-The analytic kind is the extended margin m_x (:mod:`margin_rl.stability.extended`): m_a where the Feasible
+The analytic kind is the extended margin m_x (:mod:`margin_rl.stability.analytic.extended`): m_a where the Feasible
 Region exists, and where it does not (no equilibrium, no contact) the margin of the relaxed load minus a
 penalty, or the ICP's distance to the support hull, so the reward keeps a slope there instead of the floor.
 Only unreachable feet, a solver error or an invalid lambda get the floor. The learned v2 weights are
@@ -21,9 +21,9 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from margin_rl.robot import Robot
-from margin_rl.stability.extended import extended_margin
-from margin_rl.stability.fwp import fwp_feasibility
-from margin_rl.stability.learned import LearnedMargin
+from margin_rl.stability.analytic.extended import extended_margin
+from margin_rl.stability.fwp.feasibility import fwp_feasibility
+from margin_rl.stability.learned.model import LearnedMargin
 
 MarginFunction = Callable[[np.ndarray], np.ndarray]
 """lambda (N, 47) -> margin (N,)."""
@@ -95,7 +95,7 @@ MARGIN_KINDS: dict[str, MarginKind] = {
         MarginKind(
             "analytic",
             "the analytic margin of seed 000 §III, extended to states without a Feasible Region "
-            "(margin_rl.stability.extended; per env, ~2-15 ms per env step: validation)",
+            "(margin_rl.stability.analytic.extended; per env, ~2-15 ms per env step: validation)",
             "m",
             _analytic_margin,
         ),

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from margin_rl.stability.lambda_state import StabilityState
+from margin_rl.stability.analytic.lambda_state import StabilityState
 
 
 def heading_rotation(base_rotation: np.ndarray) -> np.ndarray:

@@ -1,5 +1,7 @@
 """The package's layers import in one direction only: robot -> stability -> envs -> train, planning on top.
 
+Inside the stability layer: geometry (robot-agnostic) -> analytic -> fwp, learned.
+
 Every ``import`` and ``from ... import`` of every module (at the top or inside a function) is read with
 ``ast`` and checked against :data:`ALLOWED`; the environments never import SB3 or rsl-rl, and the stability
 core (the robot-agnostic criteria) never imports the robot layer.
@@ -23,30 +25,45 @@ def layer_of(module: str) -> str:
     """The layer of a first-party module name."""
     if module in BASE_MODULES:
         return "base"
-    if module == "margin_rl.dataset":  # the deprecated home of the stability dataset
-        return "stability"
     parts = module.split(".")
     if len(parts) == 1 or parts[1] in ("robot", "__main__"):
         return "robot"  # the package's face loads the robot layer only
+    if parts[1] == "stability" and len(parts) > 2:
+        if parts[2] not in STABILITY_PACKAGES:
+            raise AssertionError(f"{module}: stability modules live in one of the sub-packages {STABILITY_PACKAGES}")
+        return f"stability.{parts[2]}"
     if parts[1] in ("stability", "slip", "planning", "envs", "train"):
         return parts[1]
     raise AssertionError(f"{module}: no layer declared; add it to tests/test_layers.py")
 
 
+STABILITY_PACKAGES = ("geometry", "analytic", "fwp", "learned")
+"""The sub-packages of margin_rl.stability, lowest first."""
+STABILITY = {"stability", *(f"stability.{p}" for p in STABILITY_PACKAGES)}
+
 ALLOWED: dict[str, set[str]] = {
     "base": {"base"},
     "robot": {"base", "robot"},
-    "stability": {"base", "robot", "stability"},
+    "stability.geometry": {"base", "stability.geometry"},  # robot-agnostic: never the robot layer
+    "stability.analytic": {"base", "robot", "stability.geometry", "stability.analytic"},
+    "stability.fwp": {"base", "robot", "stability.geometry", "stability.analytic", "stability.fwp"},
+    "stability.learned": {"base", "robot", "stability.geometry", "stability.analytic", "stability.learned"},
+    "stability": {"base", "robot", *STABILITY},  # the layer's face re-exports its sub-packages
     "slip": {"base", "slip"},
-    "planning": {"base", "robot", "stability", "envs", "planning"},  # envs: the rough terrain's height field
-    "envs": {"base", "robot", "stability", "slip", "envs"},
-    "train": {"base", "robot", "stability", "slip", "envs", "train"},
+    "planning": {"base", "robot", *STABILITY, "envs", "planning"},  # envs: the rough terrain's height field
+    "envs": {"base", "robot", *STABILITY, "slip", "envs"},
+    "train": {"base", "robot", *STABILITY, "slip", "envs", "train"},
 }
 """Layer -> the layers its modules may import."""
 
-FORBIDDEN_THIRD_PARTY = {"envs": ("stable_baselines3", "rsl_rl"), "stability": ("gymnasium",), "robot": ("torch",)}
-ROBOT_AGNOSTIC = ("contact", "polygon", "projection", "region", "icp", "wrench_polytope", "wrench_lp")
-"""Modules of margin_rl.stability that hold the robot-agnostic criteria."""
+FORBIDDEN_THIRD_PARTY = {
+    "envs": ("stable_baselines3", "rsl_rl"),
+    **{layer: ("gymnasium",) for layer in STABILITY},
+    "stability.geometry": ("gymnasium", "torch"),
+    "robot": ("torch",),
+}
+ROBOT_AGNOSTIC = ("margin_rl.stability.fwp.polytope", "margin_rl.stability.fwp.programs")
+"""Modules outside stability.geometry that hold robot-agnostic criteria (seed 004's polytope and its programs)."""
 
 
 def source_modules() -> dict[str, Path]:
@@ -102,7 +119,7 @@ def test_imports_follow_the_layers(module: str) -> None:
                 wrong.append(f"line {line}: {target} ({layer_of(target)} layer)")
         elif top in FORBIDDEN_THIRD_PARTY.get(layer, ()):
             wrong.append(f"line {line}: {target} (third party, never in the {layer} layer)")
-        if layer == "stability" and module.split(".")[-1] in ROBOT_AGNOSTIC and target.startswith("margin_rl.robot"):
+        if module in ROBOT_AGNOSTIC and target.startswith("margin_rl.robot"):
             wrong.append(f"line {line}: {target} (the stability core is robot-agnostic)")
     assert not wrong, f"{module} ({layer} layer) imports against the layer order:\n" + "\n".join(wrong)
 
@@ -110,10 +127,12 @@ def test_imports_follow_the_layers(module: str) -> None:
 def test_the_checker_catches_an_upward_import(tmp_path: Path) -> None:
     """The walk sees imports inside functions and relative imports (a check that cannot pass vacuously)."""
     path = tmp_path / "mod.py"
-    path.write_text("def f():\n    from ..envs import core\n    import margin_rl.train.train\n")
-    targets = [t for _, t in imported_names(path, "margin_rl.stability.mod")]
-    assert targets == ["margin_rl.envs", "margin_rl.envs.core", "margin_rl.train.train"]
-    assert {layer_of(t) for t in targets} - ALLOWED["stability"] == {"envs", "train"}
+    path.write_text("def f():\n    from ...envs import core\n    import margin_rl.train.commands.train\n")
+    targets = [t for _, t in imported_names(path, "margin_rl.stability.geometry.mod")]
+    assert targets == ["margin_rl.envs", "margin_rl.envs.core", "margin_rl.train.commands.train"]
+    assert {layer_of(t) for t in targets} - ALLOWED["stability.geometry"] == {"envs", "train"}
+    # within the stability layer too: the robot-agnostic geometry may not import the analytic sub-package
+    assert layer_of("margin_rl.stability.analytic.margin") not in ALLOWED["stability.geometry"]
 
 
 def test_the_package_root_does_not_import_the_environments() -> None:

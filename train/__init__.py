@@ -1,25 +1,20 @@
-"""Training, comparison and evaluation entry points of margin_rl, installed as ``margin_rl.train``.
+"""Training, comparison and evaluation of margin_rl, installed as ``margin_rl.train``.
 
 PPO is never re-implemented here: rsl-rl's ``OnPolicyRunner`` and Stable-Baselines3's ``PPO`` do the learning,
 on thin adapters over the one batched simulation :class:`margin_rl.envs.core.AnymalCore` (ANYmal ids), or,
 for any other registered Gymnasium id (e.g. ``margin_rl/SLIPHopper-v0``), SB3 over ``gymnasium.make``.
 
-Command-line entry points (``python -m margin_rl.train.<name> --help``):
+Map (each sub-package imports only the rows above it)::
 
-* :mod:`~margin_rl.train.train`: one PPO run (``--backend rsl|sb3``), TensorBoard, checkpoints, ``--resume``;
-* :mod:`~margin_rl.train.compare`: margin weight 0 vs > 0 over seeds, Fig. 9-style plot, table (PNG, MD, JSON);
-  ``--bundle`` ships the policies with a card, ``--bundled`` evaluates shipped ones (the README's main job);
-* :mod:`~margin_rl.train.evaluate`: deterministic episodes of a saved policy (SB3 zip, rsl-rl checkpoint,
-  TorchScript): metrics JSON, plots, optional MP4.
+    environments, config, metrics, runs   the foundation: the environment interface per id, PPO settings,
+                                          episode metrics and their logs, run directories and checkpoints
+    backends/    rsl, sb3: each learner's vector-environment adapter and its training loop
+    artifacts/   policies (load any saved policy), bundle (policies shipped with a card in bundled/)
+    analysis/    episodes (the one evaluation runner), significance (Welch and bootstrap), media (plots, video)
+    commands/    the command lines: train, evaluate, compare, push_recovery, and their shared options
 
-Map: :mod:`~margin_rl.train.environments` (the environment interface, chosen once per id: batched ANYmal or
-generic Gymnasium), :mod:`~margin_rl.train.sb3_backend` and :mod:`~margin_rl.train.rsl_backend` (each backend's
-vector-environment adapter and learner), :mod:`~margin_rl.train.episodes` (the one episode runner and recorder
-of evaluations), :mod:`~margin_rl.train.media` (plots, video), :mod:`~margin_rl.train.metrics` (episode
-metrics), :mod:`~margin_rl.train.cli` (options and defaults shared by the three commands),
-:mod:`~margin_rl.train.config` (PPO settings), :mod:`~margin_rl.train.runs` (run directories),
-:mod:`~margin_rl.train.policies` (saved policies), :mod:`~margin_rl.train.bundle` (policy bundles).
-:mod:`~margin_rl.train.adapters` only re-exports moved names, with a DeprecationWarning.
+Commands: ``python -m margin_rl.train <command> --help`` (or ``margin-rl-<command>``), command being
+``train``, ``evaluate``, ``compare`` or ``push-recovery``.
 
 :func:`make_sb3_env` and :func:`make_rsl_env` give plain SB3 / rsl-rl a vector environment of an ANYmal id.
 Importing this package imports neither torch nor the RL libraries: the two factories load their backend
@@ -36,7 +31,7 @@ from typing import Any
 # margin_rl.train module is imported after this package, so this one line covers them all.
 os.environ.setdefault("GIT_PYTHON_REFRESH", "quiet")
 
-_LAZY = {"make_sb3_env": "margin_rl.train.sb3_backend", "make_rsl_env": "margin_rl.train.rsl_backend"}
+_LAZY = {"make_sb3_env": "margin_rl.train.backends.sb3", "make_rsl_env": "margin_rl.train.backends.rsl"}
 
 __all__ = ["make_rsl_env", "make_sb3_env"]
 

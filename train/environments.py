@@ -4,7 +4,7 @@ ANYmal ids (registered with the batched ``vector_entry_point`` :data:`VECTOR_ENT
 simulation, :class:`margin_rl.envs.core.AnymalCore`, configured by an :class:`~margin_rl.envs.config.EnvConfig`:
 :class:`AnymalTarget`. Every other registered id (e.g. ``margin_rl/SLIPHopper-v0``) takes the generic path:
 ``gymnasium.make(id, **env_kwargs)``, SB3 only: :class:`GymTarget`. :func:`env_target` picks the kind from the
-id's registration; :func:`margin_rl.train.train.make_spec`, ``evaluate`` and the backends work on the target.
+id's registration; :func:`margin_rl.train.commands.train.make_spec`, ``evaluate`` and the backends work on the target.
 
 Generic environment keywords are checked against the constructor's (:func:`env_kwargs_for`) and must be JSON,
 since the run's ``config.json`` stores them for ``--resume`` and ``evaluate``. The generic path trains
@@ -27,7 +27,7 @@ from gymnasium import spaces
 from margin_rl.envs.anymal import make_config
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.core import AnymalCore
-from margin_rl.stability.learned import LearnedMargin, WeightsError
+from margin_rl.stability.learned.model import LearnedMargin, WeightsError
 from margin_rl.train.config import apply_overrides, to_dict
 
 DEFAULT_ENV = "margin_rl/AnymalB-v0"
@@ -100,7 +100,7 @@ def check_margin_available(config: EnvConfig) -> None:
     """Fail early, with a hint, when the learned margin's weights cannot be loaded.
 
     Raises:
-        ValueError: (``margin_rl.stability.learned.WeightsError``) missing, corrupted or mismatched weights.
+        ValueError: (``margin_rl.stability.learned.model.WeightsError``) missing, corrupted or mismatched weights.
     """
     if config.margin != "learned":
         return

@@ -4,7 +4,7 @@ Inputs of one node (world frame W: z up; units m, rad, s):
 
 * c, v, a: CoM position, velocity and acceleration (the base trajectory's cubic polynomials);
 * (phi, theta, psi): roll, pitch, yaw of the base, R_WB = Rz(psi) Ry(theta) Rx(phi) (Z-Y-X, as
-  :mod:`margin_rl.stability.lambda_state`), with their first and second time derivatives;
+  :mod:`margin_rl.stability.analytic.lambda_state`), with their first and second time derivatives;
 * the four foot-sphere centres f_i and terrain normals n_i in W, the contact flags, mu.
 
 lambda, with H the horizontal frame (origin at the CoM, yaw psi; R_WH = Rz(psi)):

@@ -16,15 +16,15 @@ from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore, heading_rotation, lambda_from_simulation
 from margin_rl.envs.observations import POLICY_OBSERVATIONS, observation_size
 from margin_rl.robot import quat_wxyz_to_matrix
-from margin_rl.stability.lambda_state import from_lambda
-from tests.stability.test_learned import random_weights
+from margin_rl.stability.analytic.lambda_state import from_lambda
+from tests.stability.learned.test_model import random_weights
 
 NO_NOISE = RandomizationConfig(reset_joint_noise=0.0, reset_velocity_noise=0.0)
 
 
 @pytest.fixture(scope="module")
 def toy_weights(tmp_path_factory: pytest.TempPathFactory) -> str:
-    from margin_rl.stability.learned import save_weights
+    from margin_rl.stability.learned.model import save_weights
 
     path = tmp_path_factory.mktemp("w") / "toy"
     save_weights(random_weights(), path, {"robot": "toy"})
@@ -310,7 +310,7 @@ def test_episode_length_option_is_the_episode_the_agent_sees(vector: bool, toy_w
 def test_info_lambda_is_the_state_the_margin_saw(vector: bool, toy_weights: str) -> None:
     """info["lambda"] is the core's lambda; decoded, it gives the info's contacts and stance width back."""
     from margin_rl.stability import LAMBDA_DIM, lambda_names
-    from margin_rl.stability.learned import LearnedMargin
+    from margin_rl.stability.learned.model import LearnedMargin
 
     options = {"margin_weights": toy_weights, "randomization": RandomizationConfig(push_interval_s=0.1)}
     env = (
@@ -339,7 +339,7 @@ def test_info_lambda_is_the_state_the_margin_saw(vector: bool, toy_weights: str)
 def test_analytic_kind_gives_a_flight_phase_the_extended_margin_not_the_floor() -> None:
     """In the air there is no Feasible Region; the analytic kind rates the state with m_x (stability.extended)."""
     from margin_rl.envs.core import MARGIN_CLIP
-    from margin_rl.stability.extended import extended_margin
+    from margin_rl.stability.analytic.extended import extended_margin
 
     env = gym.make("margin_rl/AnymalC-v0", margin="analytic", randomization=NO_NOISE)
     env.reset(seed=0)
@@ -354,7 +354,7 @@ def test_analytic_kind_gives_a_flight_phase_the_extended_margin_not_the_floor() 
 
 def test_acceleration_filter_smooths_lambda_not_the_measured_accelerations(toy_weights: str) -> None:
     """lambda's CoM acceleration is the EMA of the finite difference; the info reports the difference itself."""
-    from margin_rl.stability.lambda_state import LAMBDA_SLICES
+    from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES
 
     envs = [
         gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE, acceleration_filter=f)

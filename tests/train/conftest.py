@@ -9,7 +9,7 @@ import pytest
 
 os.environ.setdefault("GIT_PYTHON_REFRESH", "quiet")
 
-from tests.stability.test_learned import random_weights
+from tests.stability.learned.test_model import random_weights
 
 TINY_ENV = ["--env-option", "episode_length_s=0.5"]  # 25-step episodes: metrics appear within a few iterations
 
@@ -17,7 +17,7 @@ TINY_ENV = ["--env-option", "episode_length_s=0.5"]  # 25-step episodes: metrics
 @pytest.fixture(scope="session")
 def toy_weights(tmp_path_factory: pytest.TempPathFactory) -> str:
     """Random learned-margin weights with a valid card (the bundled ones may not exist yet)."""
-    from margin_rl.stability.learned import save_weights
+    from margin_rl.stability.learned.model import save_weights
 
     path = tmp_path_factory.mktemp("weights") / "toy"
     save_weights(random_weights(), path, {"robot": "toy"})
@@ -34,7 +34,7 @@ def tiny_args(backend: str, run_dir: Path, weights: str, total: int = 384, every
 
 
 def _train(backend: str, root: Path, weights: str) -> Path:
-    from margin_rl.train.train import main
+    from margin_rl.train.commands.train import main
 
     run_dir = root / f"{backend}_run"
     assert main(tiny_args(backend, run_dir, weights)) == 0

@@ -12,14 +12,14 @@ import pytest
 from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
 
 from margin_rl.envs.config import EnvConfig
-from margin_rl.train import evaluate as evaluate_module
-from margin_rl.train import train as train_module
+from margin_rl.train.artifacts.policies import load_policy
+from margin_rl.train.backends.sb3 import make_gym_vec_env
+from margin_rl.train.commands import evaluate as evaluate_module
+from margin_rl.train.commands import train as train_module
 from margin_rl.train.config import Sb3PPOConfig, to_dict
 from margin_rl.train.environments import check_gym_env, env_kwargs_for, margin_weight_of
 from margin_rl.train.metrics import InfoEpisodeStatistics
-from margin_rl.train.policies import load_policy
 from margin_rl.train.runs import StopRequest
-from margin_rl.train.sb3_backend import make_gym_vec_env
 
 SLIP = "margin_rl/SLIPHopper-v0"
 STEPS, EVERY, NUM_ENVS = 1920, 960, 4  # 4 envs x 24 steps = 96 steps per PPO update: 20 updates
@@ -285,19 +285,3 @@ def test_info_episode_statistics_against_monitor_and_by_hand() -> None:
             ended += 1
     assert ended > 0
     venv.close()
-
-
-def test_deprecated_generic_runner_and_plot_forward_to_the_single_path(slip_run: Path, tmp_path: Path) -> None:
-    from margin_rl.train.environments import GymTarget
-    from margin_rl.train.episodes import run_episodes
-    from margin_rl.train.media import plot_episode
-
-    policy = load_policy(slip_run / "policy_torchscript.pt")
-    with pytest.warns(DeprecationWarning, match="run_episodes"):
-        old = evaluate_module.run_gym_episodes(policy, SLIP, {"margin_weight": 0.5}, num_episodes=2, seed=3)
-    new = run_episodes(policy, GymTarget(SLIP, {"margin_weight": 0.5}), num_episodes=2, seed=3)
-    assert old.episodes == new.episodes and old.trajectory.keys() == new.trajectory.keys()
-    assert list(new.trajectory)[:3] == ["step", "observation", "reward"] and new.warmup_s is None
-    with pytest.warns(DeprecationWarning, match="plot_episode"):
-        assert evaluate_module.plot_gym_episode(old, tmp_path / "old.png").is_file()
-    assert plot_episode(new, tmp_path / "new.png").stat().st_size > 10_000

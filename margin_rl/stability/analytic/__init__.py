@@ -1,0 +1,28 @@
+"""lambda (seed 000 eq. 4) and the analytic margin of a robot's state: lambda -> IK -> region -> ICP -> m_a.
+
+::
+
+    lambda_state   LAMBDA_FIELDS, StabilityState, from_lambda: the one declaration of lambda's layout
+    sampling       the Table I sampler (sample_states) and the locomotion distribution (DISTRIBUTIONS)
+    contact_batch  the contact problems of many states at once (batched IK, Jacobians, wrenches)
+    margin         analytic_margin(robot, lam) and analytic_margin_batch (the labelling path)
+    extended       the extended margin m_x: m_a continued to states without a Feasible Region
+"""
+
+from margin_rl.stability.analytic.margin import (
+    STATUSES,
+    AnalyticMarginResult,
+    AnalyticSettings,
+    BatchMargins,
+    analytic_margin,
+    analytic_margin_batch,
+)
+
+__all__ = [
+    "STATUSES",
+    "AnalyticMarginResult",
+    "AnalyticSettings",
+    "BatchMargins",
+    "analytic_margin",
+    "analytic_margin_batch",
+]

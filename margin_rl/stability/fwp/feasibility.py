@@ -1,0 +1,627 @@
+r"""Feasible Wrench Polytope (FWP) and its feasibility factor (seed 004, Orsolino et al. 2018).
+
+A second stability criterion next to the analytic margin of :mod:`margin_rl.stability.analytic.margin`:
+instead of projecting the equilibrium set onto the CoM plane, it asks whether the wrench the
+contacts must produce lies in the set of wrenches the contacts *can* produce without slipping and
+without exceeding the joint-torque limits, and measures how deep inside it is.
+
+Frame, units and sign conventions
+---------------------------------
+Everything is in the horizontal frame :math:`\mathcal{H}` of :mod:`margin_rl.stability.geometry.region`:
+origin at the current CoM, :math:`z` against gravity, :math:`x` along the heading. Contact
+:math:`i` is at :math:`p_i` [m]; :math:`f_i` [N] is the force the ground exerts on the robot there.
+Wrenches are :math:`w = (f, \tau)` [N, N m] with moments about the origin of :math:`\mathcal{H}`.
+
+*Gravito-inertial wrench (eq. 14-15).* With the CoM at :math:`c` (zero by default, i.e. moments
+about the CoM), gravity :math:`\vec g = (0, 0, -g)`, the rate of centroidal angular momentum
+:math:`\dot L` and an external wrench :math:`(f_{ext}, \tau_{ext})` applied at the CoM,
+Newton--Euler about the origin read
+
+.. math:: m\ddot c = \sum_i f_i + m\vec g + f_{ext}, \qquad
+          \dot L + c \times m\ddot c = \sum_i p_i \times f_i + c \times (m\vec g + f_{ext}) + \tau_{ext},
+
+so the contacts must produce
+
+.. math:: \sum_i \begin{bmatrix} f_i \\ p_i \times f_i \end{bmatrix} = w_{GI} :=
+          \dot h - w_G - w_{ext} = \begin{bmatrix} F \\ \dot L - \tau_{ext} + c \times F \end{bmatrix},
+          \qquad F = m(\ddot c - \vec g) - f_{ext},
+
+with :math:`\dot h = (m\ddot c,\ \dot L + c \times m\ddot c)` and :math:`w_G = (m\vec g,\ c \times
+m\vec g)` of eq. (15) and :math:`w_{ext} = (f_{ext},\ \tau_{ext} + c \times f_{ext})`. These are
+exactly the Newton--Euler rows of :func:`~margin_rl.stability.geometry.region.feasible_region` (its
+``force`` and ``moment`` at :math:`c = 0`). A standing robot needs :math:`w_{GI} = (0, 0, mg, 0, 0,
+0)`: the ground pushes up with its weight.
+
+*Force polytope (eq. 3).* The joint torques that leg :math:`i` needs to exert :math:`f_i` are
+:math:`\tau_i = \delta_i - J_i^T f_i` (bias torques :math:`\delta_i` of the leg's own gravity and
+inertia, translational foot Jacobian :math:`J_i` in :math:`\mathcal{H}`), so the limits
+:math:`\underline\tau_i \le \tau_i \le \bar\tau_i` give the polytope
+:math:`\mathcal{F}_i = \{f : J_i^T f \le \delta_i - \underline\tau_i,\ -J_i^T f \le \bar\tau_i -
+\delta_i\}`; for a square :math:`J_i` its :math:`2^3` vertices are
+:math:`J_i^{-T}(\delta_i - \tau^{lim})` over the corners :math:`\tau^{lim}` of the torque box
+(eq. 3 with the bias term; we enumerate vertices of the H-description, which is also exact for
+redundant legs where the pseudo-inverse of eq. 3 is not).
+
+*Linearised friction cone.* The ``("pyramid", k)`` cone of the feasible region, inscribed in the
+Coulomb cone: :math:`d_j^T f \le \mu\cos(\pi/k)\, n_i^T f` with :math:`d_j = \cos(2\pi j/k)
+t_{i1} + \sin(2\pi j/k) t_{i2}` and the same tangent basis, so both criteria see the same friction
+set. Its edges (eq. 8) are :math:`e_i^j = n_i + \mu(\cos\theta_j t_{i1} + \sin\theta_j t_{i2})`,
+:math:`\theta_j = (2j + 1)\pi/k`. The pyramid implies :math:`n_i^T f \ge 0` (sum its faces).
+
+Construction (eq. 10-13)
+------------------------
+1. *Bounded friction cone* :math:`\mathcal{B}_i = \mathcal{C}_i \cap \mathcal{F}_i` (eq. 10), in
+   3-D as the paper proposes: :math:`k + 2 n_a` half-spaces; every vertex is the intersection of
+   three of their planes, so all :math:`\binom{k + 2n_a}{3}` triples are solved at once and the
+   feasible, distinct solutions kept (:func:`bounded_friction_cone`).
+2. *Contact wrench vertices* :math:`\hat b_i^k = (b_i^k, p_i \times b_i^k)` (eq. 11), spanning
+   :math:`\mathcal{G}_i` (eq. 12) (:func:`contact_wrench_vertices`).
+3. *Minkowski sum* :math:`\mathrm{FWP} = \bigoplus_i \mathcal{G}_i` (eq. 13), pruned to its
+   vertices (:func:`feasible_wrench_polytope`). Every vertex of :math:`P \oplus Q` is the sum of a
+   vertex of :math:`P` and one of :math:`Q`, so contacts are added one at a time and each step
+   tests the :math:`|V(P)| \cdot |V(Q)|` candidate sums. A sum :math:`x = \sum_i \hat b_i^{k_i}` is
+   a vertex iff its tangent cone is pointed, i.e. iff the origin is not in the convex hull of the
+   unit edge directions :math:`g` of the summands at their vertices (the edges of
+   :math:`\mathcal{G}_i` at :math:`\hat b_i^{k_i}` generate its tangent cone, and the tangent cone
+   of a Minkowski sum is the sum of the tangent cones). That is decided by a phase-1 linear
+   program :math:`\min \|G^T y\|_1 + r` s.t. :math:`\mathbf{1}^T y + r = 1,\ y, r \ge 0`, whose
+   value is :math:`\min(1, \max_{\|c\|_\infty \le 1} \min_g -g^T c)`: zero for non-vertices and the
+   depth of the normal cone for vertices. The programs have 7 rows and about 30 columns, so we
+   solve thousands of them at once with a dense, vectorised simplex (Dantzig's rule, right-hand
+   side perturbed by ~1e-11 against cycling); the rare program that does not finish in
+   ``_SIMPLEX_MAX_PIVOTS`` pivots is re-solved with Clarabel. This is the "normal fan" test of
+   the Minkowski-sum algorithm the paper uses (Delos & Teissandier), without a per-candidate
+   solver call. Wrench coordinates are homogenised (moments divided by a length, below) so that
+   the threshold ``_POINTED_TOL`` on the depth is unit-free.
+
+The pruning is exact up to that threshold: on ANYmal C it reproduces brute-force per-candidate LPs
+and an independent qhull hull of the vertices (see the tests), where qhull on the raw candidates
+fails on the many coplanar facets of a Minkowski sum.
+
+Feasibility factor (eq. 21-24)
+------------------------------
+With the vertices :math:`v_j` and a centre :math:`v_c` in the interior, eq. (24) is
+
+.. math:: \max_{\lambda, s}\ s \quad \text{s.t.}\quad \sum_j \lambda_j (v_j - v_c) = w_{GI} - v_c,
+          \quad \mathbf{1}^T\lambda = 1 - s, \quad \lambda \ge 0,
+
+i.e. :math:`s = 1 - \gamma(w_{GI} - v_c)` with :math:`\gamma` the gauge of the polytope centred at
+:math:`v_c`: :math:`s \le 1`, :math:`s = 1` at the centre, :math:`s > 0` strictly inside,
+:math:`s = 0` on the boundary, :math:`s < 0` outside, and :math:`s = 1 - \alpha` at
+:math:`v_c + \alpha (v - v_c)` for a boundary point :math:`v`. Because :math:`\gamma` is invariant
+under linear maps, :math:`s` needs no unit weighting (the paper's remark). It is solved with
+Clarabel (:func:`feasibility_factor`): eq. (24) has :math:`n_v + 1` variables and 7 equality rows
+as in Table I; by default we solve its LP dual, :math:`s = 1 - \max\{(w_{GI} - v_c)^T u :
+(v_j - v_c)^T u \le 1\ \forall j\}` (6 variables, :math:`n_v` rows; same value, ~2x faster on
+thousands of vertices).
+
+The same value follows from a much smaller program on the summands
+(:func:`minkowski_feasibility_factor`): a point is in :math:`t\,\mathrm{FWP}` iff it is
+:math:`\sum_i\sum_k \mu_{ik} \hat b_i^k` with :math:`\mu \ge 0` and :math:`\sum_k \mu_{ik} = t` for
+every contact, so eq. (24) is equivalent to
+
+.. math:: \min_{\mu, t}\ t \quad\text{s.t.}\quad \sum_{i,k} \mu_{ik} (\hat b_i^k - \bar b_i) =
+          w_{GI} - v_c, \quad \sum_k \mu_{ik} = t\ \forall i, \quad \mu \ge 0, \qquad s = 1 - t,
+
+with :math:`\sum_i m_i + 1` variables instead of :math:`\prod_i m_i`, and no pruning at all. Both
+forms need the same :math:`v_c`; we use :math:`v_c = \sum_i \bar b_i`, the sum of the centroids of
+the :math:`\mathcal{G}_i` vertex sets, which is the centroid of the *unpruned* V-description (all
+:math:`\prod_i m_i` sums) and lies in the relative interior of the FWP.
+
+*Deviation from the paper:* the paper centres on the centroid of the *pruned* FWP vertices. Both
+are heuristic stand-ins for the Chebyshev centre and give the same sign of :math:`s` (hence the
+same feasibility verdict); ours does not depend on the pruning and allows the small program, so
+:func:`fwp_feasibility` is fast. ``feasibility_factor(fwp.vertices, w)`` (``center=None``) gives
+the paper's centring.
+
+*Reading s.* The centre carries a large normal load (the :math:`\mathcal{B}_i` reach far up their
+cones), so :math:`s` of a standing robot *grows* when it is pressed down, until torque limits come
+near; :math:`s` is a relative depth, not a distance, and values of different stances are not
+comparable (paper, Sec. IV-B).
+
+H-description margin (eq. 17-20)
+--------------------------------
+When an H-description :math:`\{w : a_j^T w + b_j \le 0\}` is available (:func:`fwp_halfspaces`
+builds one with qhull; seconds for 4 contacts), the margin of eq. (19)-(20) is the radius of the
+largest ellipsoid :math:`\{w_{GI} + w_d : w_d^T Q w_d \le m^2\}` inside the polytope, disturbance
+applied at the CoM (:math:`T = I`). We homogenise units with
+:math:`Q = \mathrm{diag}(1, 1, 1, \ell^{-2}, \ell^{-2}, \ell^{-2})`: a moment :math:`\tau` counts
+as the force :math:`\tau/\ell` acting at the lever arm :math:`\ell` [m], so :math:`m` is in newtons,
+and :math:`m = \min_j -(a_j^T w_{GI} + b_j) / \sqrt{a_j^T Q^{-1} a_j}` (:func:`halfspace_margin`;
+negative outside, where it is the largest violation rather than a distance). We write
+:math:`m^2` where eq. (20) writes :math:`m` so that :math:`m` is a length in wrench space.
+
+Which limit is violated (eq. 18 discussion)
+-------------------------------------------
+The paper splits the H-description into the CWC facets :math:`H_c` and the AWP facets :math:`H_a`.
+Enumerating those facets costs seconds, so :func:`wrench_violations` decides the two memberships
+directly with two small LPs: :math:`w \in \mathrm{CWC}` (eq. 7-8, cone of the edges
+:math:`\hat e_i^j`, i.e. :math:`H_c^T w \le 0`) and :math:`w \in \mathrm{AWP}` (eq. 4-6, Minkowski
+sum of the force polytopes' wrenches, :math:`H_a^T w \le 0`). Note that eq. (13) gives
+:math:`\mathrm{FWP} \subseteq \mathrm{CWC} \cap \mathrm{AWP}` (eq. 9) but not equality in general:
+one force distribution may respect friction and another the torque limits with none doing both.
+Such a wrench is reported as ``"coupled"``.
+
+Cost
+----
+Measured with ``benchmarks/bench_fwp.py`` on ANYmal C, static non-coplanar stances, a loaded 2-core
+AMD EPYC: :func:`fwp_feasibility` (default, no pruning) takes ~5 ms for 3 contacts and ~9 ms for 4
+(the feasible-region margin of the same state: ~1.5 ms). The paper's pipeline (``prune=True``)
+takes ~13 ms for 3 contacts (~600-800 FWP vertices) and ~0.2 s for 4 (~3900-4500 vertices: ~0.1 s
+to prune, ~30 ms for eq. 24). Use the criterion as an environment margin term only knowingly.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from margin_rl.robot import Robot
+from margin_rl.stability.analytic.margin import ContactProblem, contact_problem
+from margin_rl.stability.fwp.polytope import (
+    DEFAULT_N_FACES,
+    FeasibleWrenchPolytope,
+    _check_n_faces,
+    _span_basis,
+    bounded_friction_cone,
+    contact_wrench_vertices,
+    feasible_wrench_polytope,
+    force_polytope,
+    friction_cone_edges,
+)
+from margin_rl.stability.fwp.programs import _gauge_lp, _polar_support_lp, _residual_lp
+from margin_rl.stability.geometry.contact import (
+    as_array,
+    as_rows,
+    check_finite,
+    frozen_array,
+    gravito_inertial_wrench,
+    positive_scalar,
+)
+
+__all__ = [
+    "DEFAULT_N_FACES",
+    "FWP_STATUSES",
+    "FWPFeasibility",
+    "FeasibilityResult",
+    "FeasibleWrenchPolytope",
+    "bounded_friction_cone",
+    "contact_problem_polytope",
+    "contact_wrench_vertices",
+    "feasibility_factor",
+    "feasible_wrench_polytope",
+    "force_polytope",
+    "friction_cone_edges",
+    "fwp_feasibility",
+    "fwp_halfspaces",
+    "gravito_inertial_wrench",
+    "halfspace_margin",
+    "minkowski_feasibility_factor",
+    "wrench_violations",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Statuses of :func:`fwp_feasibility`: those of the analytic margin (``"infeasible"`` also covers an
+#: empty FWP).
+FWP_STATUSES: tuple[str, ...] = ("ok", "unreachable", "infeasible", "no_contact", "solver_error")
+# Relative tolerance of the membership LPs of wrench_violations (residual / wrench scale).
+_MEMBER_TOL = 1e-6
+# Relative tolerance on the part of a wrench outside the span of a lower-dimensional FWP.
+_SPAN_TOL = 1e-9
+
+
+# --------------------------------------------------------------------------------------------
+# Results
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FeasibilityResult:
+    """Result of :func:`feasibility_factor` / :func:`minkowski_feasibility_factor`.
+
+    Attributes
+    ----------
+    s : float
+        Feasibility factor of eq. (24), in ``(-inf, 1]``; ``-inf`` when no scaling of the FWP about
+        its centre contains the wrench (empty FWP, or a lower-dimensional FWP and a wrench off its
+        span); NaN on solver failure.
+    status : str
+        ``"ok"``, ``"infeasible"`` (empty FWP; ``s = -inf``) or ``"solver_error"``.
+    solve_time : float
+        Wall-clock seconds (set-up and solve).
+    n_variables, n_constraints : int
+        Size of the linear program (equality rows; the sign constraints not counted, as Table I).
+    message : str
+        Detail when ``s`` is infinite or NaN.
+    """
+
+    s: float
+    status: str
+    solve_time: float
+    n_variables: int
+    n_constraints: int
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class FWPFeasibility:
+    """Result of :func:`fwp_feasibility` for one lambda.
+
+    Attributes
+    ----------
+    s : float
+        Feasibility factor of eq. (24). NaN without a contact problem (``"unreachable"``,
+        ``"no_contact"``, or ``"infeasible"`` for a CoM not above its feet, as in the analytic margin)
+        or on solver failure; ``-inf`` when no contact forces can produce the wrench (an empty FWP,
+        status ``"infeasible"``, or a wrench off the span of a lower-dimensional FWP, status ``"ok"``).
+    status : str
+        One of :data:`FWP_STATUSES`.
+    wrench : (6,) ndarray
+        Gravito-inertial wrench :math:`w_{GI}` [N, N m] about the CoM, frame H (NaN without a problem).
+    violated : tuple of str
+        Empty if ``s >= 0``; otherwise from :func:`wrench_violations`: ``"contact"`` (outside the
+        CWC, :math:`H_c^T w > 0`: slipping, pulling or tipping), ``"actuation"`` (outside the AWP,
+        :math:`H_a^T w > 0`: torque limits), or ``("coupled",)`` when inside both but not in the FWP.
+    n_vertices : int or None
+        Number of FWP vertices when pruned, else None.
+    contact_vertex_counts : tuple of int
+        Vertices of each bounded friction cone.
+    timings : dict
+        Seconds: ``kinematics`` (IK, Jacobians, bias), ``fwp`` (eq. 10-13), ``lp`` (eq. 24),
+        ``violations`` (if computed), ``total``.
+    message : str
+        Detail when the status is not ok or ``s`` is infinite.
+    fwp : FeasibleWrenchPolytope or None
+        The polytope (None when there is no contact problem).
+    """
+
+    s: float
+    status: str
+    wrench: FloatArray
+    violated: tuple[str, ...]
+    n_vertices: int | None
+    contact_vertex_counts: tuple[int, ...]
+    timings: dict[str, float]
+    message: str = ""
+    fwp: FeasibleWrenchPolytope | None = None
+
+
+# --------------------------------------------------------------------------------------------
+# Feasibility factor (eq. 21-24)
+# --------------------------------------------------------------------------------------------
+
+
+def _homogeniser(length_scale: float) -> FloatArray:
+    return np.concatenate([np.ones(3), np.full(3, 1.0 / length_scale)])
+
+
+def feasibility_factor(
+    vertices: ArrayLike,
+    wrench: ArrayLike,
+    center: ArrayLike | None = None,
+    length_scale: float = 1.0,
+    dual: bool = True,
+) -> FeasibilityResult:
+    r"""Feasibility factor :math:`s` of ``wrench`` w.r.t. the polytope ``conv(vertices)`` (eq. 21-24).
+
+    Eq. (24) has :math:`n_v + 1` variables and 7 equality rows (the 6 wrench rows and
+    :math:`\mathbf{1}^T \lambda + s = 1`). By LP duality its value is
+    :math:`s = 1 - \max\{\hat w^T u : \hat v_j^T u \le 1\ \forall j\}` (the gauge as the support
+    function of the polar), a program with 6 variables and :math:`n_v` rows that Clarabel solves ~4x
+    faster on thousands of vertices; both give the same ``s`` to solver accuracy.
+
+    Parameters
+    ----------
+    vertices : (V, 6) array_like
+        V-description [N, N m] (extra interior points do not change ``s`` for a given centre).
+    wrench : (6,) array_like
+        Wrench to test, e.g. :func:`gravito_inertial_wrench`, same frame and reference point.
+    center : (6,) array_like, optional
+        Interior point :math:`v_c`; default the centroid of ``vertices`` (the paper's choice). Pass
+        ``fwp.center`` to reproduce :func:`minkowski_feasibility_factor`.
+    length_scale : float
+        Length [m] dividing the moment rows, only for the conditioning of the program (``s`` is
+        invariant to it).
+    dual : bool
+        Solve the dual (default) or eq. (24) as written. ``n_variables`` and ``n_constraints`` of the
+        result are those of eq. (24) either way.
+
+    Returns
+    -------
+    FeasibilityResult
+        ``s = -inf`` (status ok) if the vertices span less than 6 dimensions and the wrench is off
+        their affine hull, or if ``center`` is not interior and the wrench is not in the cone of the
+        centred vertices.
+    """
+    v = as_rows("vertices", vertices, 6, rows="V", min_rows=1)
+    check_finite("vertices", v)
+    w = as_array("wrench", wrench, (6,))
+    check_finite("wrench", w)
+    c = v.mean(axis=0) if center is None else as_array("center", center, (6,))
+    check_finite("center", c)
+    h = _homogeniser(positive_scalar("length_scale", length_scale))
+    return _factor([(v - c) * h], (w - c) * h, n_equalities_paper=7, dual=dual)
+
+
+def _factor(
+    blocks: list[FloatArray], rhs: FloatArray, n_equalities_paper: int, dual: bool = False
+) -> FeasibilityResult:
+    t0 = time.perf_counter()
+    centred = np.concatenate(blocks)
+    scale = float(np.max(np.abs(centred), initial=0.0))
+    basis = _span_basis(centred, scale)
+    n_var = centred.shape[0] + 1
+    off_span = rhs - basis @ (basis.T @ rhs)
+    if np.linalg.norm(off_span) > _SPAN_TOL * max(scale, float(np.linalg.norm(rhs))):
+        msg = f"wrench is off the span of the {basis.shape[1]}-dimensional FWP: no contact forces produce it"
+        return FeasibilityResult(-math.inf, "ok", time.perf_counter() - t0, n_var, n_equalities_paper, msg)
+    if dual and len(blocks) == 1:
+        s, msg = _polar_support_lp(blocks[0], rhs, basis)
+    else:
+        t, msg, _ = _gauge_lp(blocks, rhs, basis)
+        s = 1.0 - t
+    status = "solver_error" if math.isnan(s) else "ok"
+    return FeasibilityResult(s, status, time.perf_counter() - t0, n_var, n_equalities_paper, msg)
+
+
+def minkowski_feasibility_factor(fwp: FeasibleWrenchPolytope, wrench: ArrayLike) -> FeasibilityResult:
+    r"""Feasibility factor of eq. (24) solved on the summands, without the FWP vertices.
+
+    The program of the module docstring (:math:`\sum_i m_i + 1` variables, 6 + n equality rows); its
+    value equals ``feasibility_factor(fwp.vertices, wrench, center=fwp.center)`` for a pruned
+    ``fwp``, but it also works on ``prune=False`` polytopes and costs ~1 ms.
+
+    Parameters
+    ----------
+    fwp : FeasibleWrenchPolytope
+        From :func:`feasible_wrench_polytope` (pruned or not).
+    wrench : (6,) array_like
+        Wrench [N, N m], moments about the CoM, frame H.
+
+    Returns
+    -------
+    FeasibilityResult
+        Status ``"infeasible"`` and ``s = -inf`` for an empty FWP.
+    """
+    w = as_array("wrench", wrench, (6,))
+    check_finite("wrench", w)
+    n = len(fwp.force_vertices)
+    n_var = sum(fwp.contact_vertex_counts) + 1
+    if fwp.dim < 0:
+        return FeasibilityResult(-math.inf, "infeasible", 0.0, n_var, 6 + n, "a bounded friction cone is empty")
+    h = _homogeniser(fwp.length_scale)
+    if n == 0:
+        s = 1.0 if not np.any(w) else -math.inf
+        return FeasibilityResult(s, "ok", 0.0, 1, 0, "no contact: the FWP is {0}")
+    blocks = []
+    for p, f in zip(fwp.points, fwp.force_vertices, strict=True):
+        g = np.hstack([f, np.cross(p, f)]) * h
+        blocks.append(g - g.mean(axis=0))
+    return _factor(blocks, (w - fwp.center) * h, n_equalities_paper=6 + n)
+
+
+# --------------------------------------------------------------------------------------------
+# Which limit is violated (eq. 18 discussion) and the H-description margin (eq. 17-20)
+# --------------------------------------------------------------------------------------------
+
+
+def wrench_violations(fwp: FeasibleWrenchPolytope, wrench: ArrayLike) -> tuple[str, ...]:
+    r"""Which limits a wrench violates: the CWC and AWP blocks :math:`H_c`, :math:`H_a` of eq. (18).
+
+    Decided by membership LPs rather than by the facets: ``"contact"`` if the wrench is not a
+    non-negative combination of the friction-cone edge wrenches :math:`\hat e_i^j` (outside the
+    CWC, eq. 7-8: a foot would slip, pull or the robot tip over its support), ``"actuation"`` if it
+    is not in :math:`\bigoplus_i \mathrm{conv}(w_{i,k})` (outside the AWP, eq. 4-6: some joint
+    torque would exceed its limit whatever the contacts). A wrench inside both but outside the FWP
+    (``s < 0``) gives ``("coupled",)``: every force distribution that respects friction violates a
+    torque limit and vice versa. Inside the FWP: ``()``.
+    Membership is decided to a relative tolerance of 1e-6, so wrenches on a boundary may go either way.
+
+    Parameters
+    ----------
+    fwp : FeasibleWrenchPolytope
+        Pruned or not.
+    wrench : (6,) array_like
+        Wrench [N, N m] about the CoM, frame H.
+
+    Returns
+    -------
+    tuple of str
+    """
+    w = as_array("wrench", wrench, (6,))
+    check_finite("wrench", w)
+    h = _homogeniser(fwp.length_scale)
+    wh = w * h
+    tol = _MEMBER_TOL * max(1.0, float(np.sum(np.abs(wh))))
+
+    def wrenches(sets: tuple[FloatArray, ...]) -> list[FloatArray]:
+        return [np.hstack([f, np.cross(p, f)]) * h for p, f in zip(fwp.points, sets, strict=True)]
+
+    if not fwp.force_vertices:
+        return () if not np.any(w) else ("contact", "actuation")
+    out = []
+    if not _residual_lp(wrenches(fwp.cone_edges), wh, convex=False) <= tol:
+        out.append("contact")
+    if not _residual_lp(wrenches(fwp.actuation_vertices), wh, convex=True) <= tol:
+        out.append("actuation")
+    if out:
+        return tuple(out)
+    if fwp.dim >= 0 and minkowski_feasibility_factor(fwp, w).s >= 0.0:
+        return ()
+    return ("coupled",)
+
+
+def fwp_halfspaces(vertices: ArrayLike, length_scale: float) -> FloatArray:
+    r"""H-description of ``conv(vertices)`` (eq. 17) with qhull, in the units of :func:`halfspace_margin`.
+
+    qhull works on the homogenised vertices :math:`(f, \tau/\ell)`; its triangulated facets are merged
+    by rounding their unit equations. Expensive: ~0.2 s for 500 vertices (3 contacts), seconds to
+    minutes for 4 contacts (the paper's Table II); the FWP must be full-dimensional.
+
+    Parameters
+    ----------
+    vertices : (V, 6) array_like
+        FWP vertices [N, N m] (``fwp.vertices``).
+    length_scale : float
+        :math:`\ell` [m] of :math:`Q` (e.g. ``fwp.length_scale`` or the CoM height).
+
+    Returns
+    -------
+    (h, 7) ndarray
+        Rows ``[a, b]`` with ``a^T w + b <= 0`` inside, ``a`` of unit :math:`Q^{-1}`-norm:
+        :math:`a_f^T a_f + \ell^2 a_\tau^T a_\tau = 1`.
+    """
+    from scipy.spatial import ConvexHull  # local: only this function needs qhull
+
+    v = as_rows("vertices", vertices, 6, rows="V", min_rows=7)
+    check_finite("vertices", v)
+    ell = positive_scalar("length_scale", length_scale)
+    h = _homogeniser(ell)
+    vh = v * h
+    c = vh.mean(axis=0)
+    eq = ConvexHull(vh - c, qhull_options="Qx Q12").equations  # unit normals in homogenised coordinates
+    eq = np.column_stack([eq[:, :6], eq[:, 6] - eq[:, :6] @ c])  # undo the centring
+    scale = max(1.0, float(np.max(np.abs(eq[:, 6]))))
+    key = np.round(np.column_stack([eq[:, :6], eq[:, 6] / scale]) * 1e8)
+    eq = eq[np.sort(np.unique(key, axis=0, return_index=True)[1])]
+    # a_hom^T (h * w) + b = (h * a_hom)^T w + b.
+    return np.column_stack([eq[:, :6] * h, eq[:, 6]])
+
+
+def halfspace_margin(halfspaces: ArrayLike, wrench: ArrayLike, length_scale: float) -> float:
+    r"""Margin :math:`m` of eq. (19)-(20) [N]: radius of the largest Q-ball around ``wrench`` in the polytope.
+
+    With :math:`Q = \mathrm{diag}(1, 1, 1, \ell^{-2}, \ell^{-2}, \ell^{-2})` (module docstring),
+    :math:`m = \min_j -(a_j^T w + b_j) / \sqrt{a_j^T Q^{-1} a_j}`.
+
+    Parameters
+    ----------
+    halfspaces : (h, 7) array_like
+        Rows ``[a, b]``, ``a^T w + b <= 0`` inside (e.g. :func:`fwp_halfspaces`, or scipy's
+        ``ConvexHull.equations`` of physical wrenches).
+    wrench : (6,) array_like
+        :math:`w_{GI}` [N, N m].
+    length_scale : float
+        :math:`\ell` [m] (> 0).
+
+    Returns
+    -------
+    float
+        Positive inside (largest disturbance, in newtons of equivalent force, that keeps the wrench
+        feasible), zero on the boundary, negative outside (largest facet violation, not a distance).
+    """
+    hs = as_rows("halfspaces", halfspaces, 7, rows="h", min_rows=1)
+    check_finite("halfspaces", hs)
+    w = as_array("wrench", wrench, (6,))
+    check_finite("wrench", w)
+    ell = positive_scalar("length_scale", length_scale)
+    a = hs[:, :6]
+    q_inv_norm = np.sqrt(np.sum(a[:, :3] ** 2, axis=1) + ell**2 * np.sum(a[:, 3:] ** 2, axis=1))
+    if np.any(q_inv_norm <= 0.0):
+        raise ValueError("halfspaces must have non-zero normals")
+    return float(np.min(-(a @ w + hs[:, 6]) / q_inv_norm))
+
+
+# --------------------------------------------------------------------------------------------
+# Robot layer
+# --------------------------------------------------------------------------------------------
+
+
+def contact_problem_polytope(
+    problem: ContactProblem, n_faces: int = DEFAULT_N_FACES, prune: bool = True
+) -> FeasibleWrenchPolytope:
+    """:func:`feasible_wrench_polytope` of a state's contacts.
+
+    ``problem`` comes from :func:`~margin_rl.stability.analytic.margin.contact_problem`.
+    """
+    return feasible_wrench_polytope(
+        problem.contact_points,
+        problem.normals,
+        problem.stance,
+        problem.mu,
+        problem.jacobians,
+        problem.torque_limits,
+        problem.leg_bias,
+        n_faces=n_faces,
+        prune=prune,
+    )
+
+
+def fwp_feasibility(
+    robot: Robot, lam: ArrayLike, n_faces: int = DEFAULT_N_FACES, prune: bool = False
+) -> FWPFeasibility:
+    r"""FWP feasibility factor of one state lambda (the same input as the analytic margin).
+
+    Pipeline: :func:`~margin_rl.stability.analytic.margin.contact_problem` (IK, Jacobians and bias torques in
+    H, contact points, statuses) :math:`\to` :func:`feasible_wrench_polytope` :math:`\to`
+    :func:`gravito_inertial_wrench` (about the CoM) :math:`\to` ``s`` (eq. 24) :math:`\to` for
+    ``s < 0``, :func:`wrench_violations`.
+
+    Unlike the analytic margin, the criterion is instantaneous: the CoM velocity (the ICP) does not
+    enter, and friction is the ``n_faces`` pyramid inscribed in the cone (the analytic margin
+    defaults to the exact cone). ``s`` is a relative, unitless depth that cannot be compared across
+    contact configurations (paper, Sec. IV-B).
+
+    Parameters
+    ----------
+    robot : Robot
+        From :func:`margin_rl.load_robot`.
+    lam : (47,) array_like
+        lambda (:mod:`margin_rl.stability.analytic.lambda_state`).
+    n_faces : int
+        Faces of the linearised friction cones (>= 3).
+    prune : bool
+        False (default): eq. (24) on the summands (:func:`minkowski_feasibility_factor`), a few ms.
+        True: build the pruned V-description and solve eq. (24) on its vertices, as the paper does
+        (same ``s``; ~0.1-0.3 s for 4 contacts); ``n_vertices`` is then reported.
+
+    Returns
+    -------
+    FWPFeasibility
+        Never raises for unreachable feet or missing contacts (statuses, ``s`` NaN).
+
+    Raises
+    ------
+    ValueError
+        Malformed lambda (see :func:`~margin_rl.stability.analytic.margin.contact_problem`) or ``n_faces``.
+    """
+    t0 = time.perf_counter()
+    _check_n_faces(n_faces)
+    problem = contact_problem(robot, np.asarray(lam, dtype=np.float64))
+    t1 = time.perf_counter()
+    nan_wrench = frozen_array(np.full(6, np.nan))
+    if not isinstance(problem, ContactProblem):
+        status, message, _ = problem
+        timings = {"kinematics": t1 - t0, "total": time.perf_counter() - t0}
+        return FWPFeasibility(math.nan, status, nan_wrench, (), None, (), timings, message)
+
+    fwp = contact_problem_polytope(problem, n_faces=n_faces, prune=prune)
+    wrench = frozen_array(problem.gravito_inertial_wrench())
+    t2 = time.perf_counter()
+    if prune and fwp.n_vertices > 0:
+        res = feasibility_factor(fwp.vertices, wrench, center=fwp.center, length_scale=fwp.length_scale)
+    else:
+        res = minkowski_feasibility_factor(fwp, wrench)
+    t3 = time.perf_counter()
+    timings = {"kinematics": t1 - t0, "fwp": t2 - t1, "lp": t3 - t2}
+    violated: tuple[str, ...] = ()
+    if res.status != "solver_error" and res.s < 0.0:
+        violated = wrench_violations(fwp, wrench)
+        timings["violations"] = time.perf_counter() - t3
+    timings["total"] = time.perf_counter() - t0
+    return FWPFeasibility(
+        s=res.s,
+        status=res.status,
+        wrench=wrench,
+        violated=violated,
+        n_vertices=fwp.n_vertices if prune else None,
+        contact_vertex_counts=fwp.contact_vertex_counts,
+        timings=timings,
+        message=res.message,
+        fwp=fwp,
+    )

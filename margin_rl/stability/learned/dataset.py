@@ -1,0 +1,457 @@
+"""Analytic-margin datasets: states labelled with m_a, in resumable shards.
+
+States are drawn from a named distribution (``--distribution``): ``table_i``, seed 000's Table I (the
+default), or ``locomotion``, Table I widened to the states walking policies visit
+(:data:`margin_rl.stability.analytic.sampling.LOCOMOTION`); the manifest records which.
+
+Command line::
+
+    python -m margin_rl.stability.learned.dataset generate --robot anymal_c --n 1000000 --out data/anymal_c
+        [--workers 2]
+    python -m margin_rl.stability.learned.dataset generate ... --ray auto          # the same tasks on a Ray cluster
+    python -m margin_rl.stability.learned.dataset summary data/anymal_c
+
+Layout of a dataset directory::
+
+    manifest.json        robot, sampler version, distribution, seed, package version, analytic settings (with the
+                         labelling path that made the labels: "batched" or "per_state"), shard size
+    shard_00000.npz      lam (k, 47) float32, margin (k,) float32 [m] (NaN unless ok),
+                         status (k,) int8 (index into STATUSES), n_lps (k,) int16, seconds (k,) float32,
+                         extended (k,) float32 [m] the extended margin m_x (NaN only for unreachable feet
+                         or a solver error), load_fraction (k,) float32 alpha*, source (k,) int8 (index
+                         into margin_rl.stability.analytic.extended.SOURCES); format 1 shards have no m_x columns
+
+A network is trained on one target (:func:`load_dataset`): ``"analytic"`` (m_a, the ``ok`` samples) or
+``"extended"`` (m_x, every sample that has one: :mod:`margin_rl.stability.analytic.extended`).
+
+Every shard is an independent task with its own seed (``SeedSequence(seed, spawn_key=(shard,))``), so
+the dataset does not depend on the number of workers or on the order shards finish. A shard is
+written to a temporary file and renamed into place, so a killed run loses at most the shards in
+flight; rerunning the same command skips finished shards. A directory made with other settings is
+refused rather than mixed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import shlex
+import sys
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from margin_rl.atomic import atomic_savez, atomic_write_text
+from margin_rl.provenance import sha256_file
+from margin_rl.robot import available_robots
+from margin_rl.stability.analytic.extended import (
+    DEFAULT_BISECTION_STEPS,
+    DEFAULT_LOAD_PENALTY,
+    check_extended_settings,
+    extended_margin_batch,
+)
+from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM
+from margin_rl.stability.analytic.margin import (
+    LABELLING_PATHS,
+    STATUSES,
+    AnalyticSettings,
+    worker_robot,
+)
+from margin_rl.stability.analytic.sampling import DISTRIBUTIONS, SAMPLER_VERSION, sample_around_states, sample_states
+
+DISTRIBUTION_NAMES: tuple[str, ...] = (*DISTRIBUTIONS, "rollouts")
+"""State distributions of a dataset: the named samplers, and "rollouts" (around recorded states)."""
+
+MANIFEST = "manifest.json"
+FORMAT_VERSION = 2  # 2: shards carry the extended margin m_x (extended, load_fraction, source)
+
+TARGETS: tuple[str, ...] = ("analytic", "extended")
+"""What a network learns from a dataset: m_a on ok samples, or m_x on every sample that has one."""
+
+
+class DatasetError(ValueError):
+    """A dataset directory or request that cannot be used as asked."""
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """What defines a dataset; two runs with equal specs produce identical shards."""
+
+    robot: str
+    n: int
+    shard_size: int
+    seed: int
+    settings: AnalyticSettings
+    distribution: str = "table_i"  # a name of DISTRIBUTION_NAMES
+    states: str | None = None  # "rollouts": the recorded lambdas (npz, key "lam") the states are drawn around
+    states_sha256: str | None = None  # of that file, so that a dataset names exactly what it was drawn from
+    load_penalty: float = DEFAULT_LOAD_PENALTY  # kappa of the extended margin [m]
+    bisection_steps: int = DEFAULT_BISECTION_STEPS  # halvings for alpha* of the extended margin
+
+    def __post_init__(self) -> None:
+        try:  # the extended margin's own check, as a DatasetError
+            check_extended_settings(self.load_penalty, self.bisection_steps, penalty_name="load_penalty")
+        except ValueError as exc:
+            raise DatasetError(str(exc)) from None
+        if self.distribution not in DISTRIBUTION_NAMES:
+            raise DatasetError(f"distribution must be one of {list(DISTRIBUTION_NAMES)}, got {self.distribution!r}")
+        if (self.distribution == "rollouts") != (self.states is not None):
+            raise DatasetError(
+                "distribution 'rollouts' needs --states FILE.npz (recorded lambdas, e.g. from "
+                "benchmarks/bench_locomotion_distribution.py --states), and only it takes one"
+            )
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.n // self.shard_size)
+
+    def shard_length(self, index: int) -> int:
+        return min(self.shard_size, self.n - index * self.shard_size)
+
+    def command(self, out: str | Path) -> str:
+        """The command line that generates this dataset into ``out``."""
+        friction = self.settings.friction
+        friction_arg = friction if isinstance(friction, str) else f"{friction[0]}:{friction[1]}"
+        return (
+            f"python -m margin_rl.stability.learned.dataset generate --robot {self.robot} --n {self.n} "
+            f"--out {shlex.quote(str(out))} --seed {self.seed} --shard-size {self.shard_size} "
+            f"--friction {friction_arg} --focus-tol {self.settings.focus_tol} --labelling {self.settings.labelling} "
+            f"--distribution {self.distribution}"
+            + (f" --states {shlex.quote(self.states)}" if self.states else "")
+            + f" --load-penalty {self.load_penalty} --bisection-steps {self.bisection_steps}"
+        )
+
+    def identity(self) -> dict[str, object]:
+        """The fields that must match to resume or extend a directory (n may grow)."""
+        return {
+            "format_version": FORMAT_VERSION,
+            "robot": self.robot,
+            "sampler_version": SAMPLER_VERSION,
+            "distribution": self.distribution,
+            **({"states_sha256": self.states_sha256} if self.states else {}),
+            "seed": self.seed,
+            "shard_size": self.shard_size,
+            "analytic_settings": self.settings.as_dict(),
+            "extended_margin": {"load_penalty": self.load_penalty, "bisection_steps": self.bisection_steps},
+        }
+
+
+def shard_path(out: Path, index: int) -> Path:
+    return out / f"shard_{index:05d}.npz"
+
+
+def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
+    """Sample, label and write shard ``index``; returns its status counts. Runs in a worker."""
+    robot = worker_robot(spec.robot)
+    seed = np.random.SeedSequence(spec.seed, spawn_key=(index,))
+    if spec.distribution == "rollouts":
+        with np.load(spec.states) as recorded:
+            lams = sample_around_states(robot, recorded["lam"], spec.shard_length(index), seed=seed)
+    else:
+        lams = sample_states(robot, spec.shard_length(index), seed=seed, table=DISTRIBUTIONS[spec.distribution])
+    labels = extended_margin_batch(
+        robot, lams, spec.settings, workers=1, penalty=spec.load_penalty, bisection_steps=spec.bisection_steps
+    )
+    analytic = labels.analytic
+    atomic_savez(
+        shard_path(out, index),
+        lam=lams.astype(np.float32),
+        margin=analytic.margin.astype(np.float32),
+        status=analytic.status,
+        n_lps=analytic.n_lps,
+        seconds=analytic.seconds.astype(np.float32),
+        extended=labels.margin.astype(np.float32),
+        load_fraction=labels.load_fraction.astype(np.float32),
+        source=labels.source,
+    )
+    return analytic.counts()
+
+
+def _shard_is_complete(path: Path, length: int) -> bool:
+    if not path.is_file():
+        return False
+    try:
+        with np.load(path) as data:
+            return data["lam"].shape == (length, LAMBDA_DIM) and data["status"].shape == (length,)
+    except Exception:  # a truncated or foreign file: regenerate it
+        return False
+
+
+def _prepare(spec: DatasetSpec, out: Path, command: str) -> list[int]:
+    """Create or check the manifest; return the shards still to do."""
+    out.mkdir(parents=True, exist_ok=True)
+    manifest_path = out / MANIFEST
+    identity = spec.identity()
+    if manifest_path.is_file():
+        old = json.loads(manifest_path.read_text())
+        if isinstance(old.get("analytic_settings"), dict):
+            # Manifests written before the labelling path was recorded name none: theirs was per state.
+            old["analytic_settings"] = AnalyticSettings.from_dict(old["analytic_settings"]).as_dict()
+        old.setdefault("distribution", "table_i")  # manifests from before distributions were named
+        mismatched = [k for k, v in identity.items() if old.get(k) != v]
+        if mismatched:
+            details = "; ".join(f"{k}: {old.get(k)!r} there, {identity[k]!r} asked" for k in mismatched)
+            hint = ""
+            old_path = (old.get("analytic_settings") or {}).get("labelling")
+            if mismatched == ["analytic_settings"] and old_path != spec.settings.labelling:
+                hint = f" (to resume it with the path that labelled it, pass --labelling {old_path})"
+            raise DatasetError(f"{out} holds a dataset with other settings ({details}){hint}; use another --out")
+        if spec.n < old.get("n", 0):
+            # A smaller n would rewrite its last shard shorter and orphan the rest.
+            raise DatasetError(f"{out} already holds n={old['n']} samples; ask for at least that many to resume")
+        # A larger n extends the dataset: a partial last shard is regenerated at full length from its
+        # own seed, and new shards are added.
+    # Lazy: the version is defined by the top-level package, which imports every layer (envs too).
+    from margin_rl import __version__
+
+    manifest = {
+        **identity,
+        "n": spec.n,
+        "n_shards": spec.n_shards,
+        "package_version": __version__,
+        "statuses": list(STATUSES),
+        "fields": {
+            "lam": f"(k, {LAMBDA_DIM}) float32, layout margin_rl.stability.LAMBDA_FIELDS",
+            "margin": "(k,) float32 analytic margin m_a [m], NaN unless status is ok",
+            "status": "(k,) int8 index into statuses",
+            "n_lps": "(k,) int16 conic programs solved",
+            "seconds": "(k,) float32 wall time of the analytic margin",
+            "extended": "(k,) float32 extended margin m_x [m] (margin_rl.stability.analytic.extended), NaN where none",
+            "load_fraction": "(k,) float32 alpha*: the supportable fraction of the dynamic load (NaN: fallback)",
+            "source": "(k,) int8 index into margin_rl.stability.analytic.extended.SOURCES",
+        },
+        "command": command,
+    }
+    atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")
+    return [i for i in range(spec.n_shards) if not _shard_is_complete(shard_path(out, i), spec.shard_length(i))]
+
+
+def _local_tasks(spec: DatasetSpec, todo: Sequence[int], out: Path, workers: int) -> Iterator[tuple[int, dict]]:
+    if workers == 1:
+        for i in todo:
+            yield i, make_shard(spec, i, out)
+        return
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        # imap_unordered: a shard's result arrives as soon as it is written, whatever the order.
+        yield from pool.imap_unordered(_make_shard_star, [(spec, i, out) for i in todo])
+
+
+def _make_shard_star(args: tuple[DatasetSpec, int, Path]) -> tuple[int, dict[str, int]]:
+    spec, index, out = args
+    return index, make_shard(spec, index, out)
+
+
+def _ray_tasks(spec: DatasetSpec, todo: Sequence[int], out: Path, address: str) -> Iterator[tuple[int, dict]]:
+    try:
+        import ray  # lazy: an optional dependency (margin_rl[ray]), needed only with --ray
+    except ImportError as exc:
+        raise DatasetError("--ray needs Ray: pip install 'margin_rl[ray]'") from exc
+    started = not ray.is_initialized()
+    if started:
+        ray.init(address=None if address == "local" else address, ignore_reinit_error=True, log_to_driver=False)
+    try:
+        remote = ray.remote(_make_shard_star)
+        # Shards are written by the workers to `out`, which must be a shared path on a real cluster.
+        pending = {remote.remote((spec, i, out)): i for i in todo}
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                pending.pop(ref)
+                yield ray.get(ref)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def generate(
+    spec: DatasetSpec,
+    out: str | Path,
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = True,
+    command: str = "",
+) -> dict[str, int]:
+    """Generate (or finish) a dataset; returns the status counts of the shards made in this call."""
+    out = Path(out)
+    if spec.robot not in available_robots():
+        raise DatasetError(f"unknown robot {spec.robot!r}; available robots: {', '.join(available_robots())}")
+    if spec.n <= 0 or spec.shard_size <= 0:
+        raise DatasetError(f"n and shard size must be positive, got n={spec.n}, shard size={spec.shard_size}")
+    todo = _prepare(spec, out, command or spec.command(out))
+    workers = (os.cpu_count() or 1) if workers is None else workers
+    if workers < 1:
+        raise DatasetError(f"workers must be >= 1, got {workers}")
+    total_todo = sum(spec.shard_length(i) for i in todo)
+    counts = dict.fromkeys(STATUSES, 0)
+    skipped = spec.n_shards - len(todo)
+    if not todo:
+        _log(progress, f"{out}: all {spec.n_shards} shards already present")
+        return counts
+    _log(progress, f"{out}: {len(todo)} shards to make ({total_todo} samples), {skipped} already present")
+    tasks: Iterable[tuple[int, dict]] = (
+        _ray_tasks(spec, todo, out, ray_address) if ray_address else _local_tasks(spec, todo, out, workers)
+    )
+    bar = _progress_bar(total_todo, progress)
+    for index, shard_counts in tasks:
+        for k, v in shard_counts.items():
+            counts[k] += v
+        bar.update(spec.shard_length(index))
+        bar.set_postfix(ok=f"{counts['ok'] / max(1, sum(counts.values())):.0%}")
+    bar.close()
+    _log(progress, "status counts: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    return counts
+
+
+def _progress_bar(total: int, enabled: bool):
+    return tqdm(total=total, unit="sample", unit_scale=True, smoothing=0.05, disable=not enabled, file=sys.stderr)
+
+
+def _log(enabled: bool, message: str) -> None:
+    if enabled:
+        print(message, file=sys.stderr, flush=True)
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """The samples of a dataset directory that have the requested target, plus what was excluded."""
+
+    lam: np.ndarray  # (N, 47) float32
+    margin: np.ndarray  # (N,) float32 [m]: m_a ("analytic") or m_x ("extended")
+    counts: dict[str, int]  # status counts over all loaded shards
+    manifest: dict[str, object]
+    target: str = "analytic"
+    analytic: np.ndarray | None = None  # (N,) float32 m_a of the returned samples (NaN where not ok)
+
+
+def load_dataset(path: str | Path, max_samples: int | None = None, target: str = "analytic") -> Dataset:
+    """Load the samples of a dataset directory that have ``target`` (others are counted, not returned).
+
+    ``target="analytic"``: the ``ok`` samples and m_a; ``"extended"``: every sample with a finite m_x
+    (ok, infeasible and no-contact states alike), which needs a format-2 dataset.
+    """
+    if target not in TARGETS:
+        raise DatasetError(f"target must be one of {list(TARGETS)}, got {target!r}")
+    path = Path(path)
+    manifest_path = path / MANIFEST
+    if not manifest_path.is_file():
+        raise DatasetError(f"{path} is not a margin_rl dataset (no {MANIFEST})")
+    manifest = json.loads(manifest_path.read_text())
+    lams, margins, analytic = [], [], []
+    counts = dict.fromkeys(manifest.get("statuses", STATUSES), 0)
+    n_loaded = 0
+    for shard in sorted(path.glob("shard_*.npz")):
+        with np.load(shard) as data:
+            status = data["status"]
+            for i, name in enumerate(STATUSES):
+                counts[name] += int(np.sum(status == i))
+            if target == "extended":
+                if "extended" not in data:
+                    raise DatasetError(
+                        f"{shard} has no extended margin (a format-1 dataset): train it with target 'analytic', "
+                        "or label a new dataset with this version"
+                    )
+                values = data["extended"]
+                keep = np.isfinite(values)
+            else:
+                values = data["margin"]
+                keep = status == STATUSES.index("ok")
+            lams.append(data["lam"][keep])
+            margins.append(values[keep])
+            analytic.append(np.where(status == STATUSES.index("ok"), data["margin"], np.nan)[keep])
+            n_loaded += int(keep.sum())
+        if max_samples is not None and n_loaded >= max_samples:
+            break
+    if not lams:
+        raise DatasetError(f"{path} has no shards yet")
+    lam, margin, analytic_margin = np.concatenate(lams), np.concatenate(margins), np.concatenate(analytic)
+    if max_samples is not None:
+        lam, margin, analytic_margin = lam[:max_samples], margin[:max_samples], analytic_margin[:max_samples]
+    return Dataset(lam=lam, margin=margin, counts=counts, manifest=manifest, target=target, analytic=analytic_margin)
+
+
+def _parse_friction(text: str) -> str | tuple[str, int]:
+    if text == "cone":
+        return "cone"
+    if text.startswith("pyramid:"):
+        return ("pyramid", int(text.split(":", 1)[1]))
+    raise argparse.ArgumentTypeError(f"friction must be 'cone' or 'pyramid:K', got {text!r}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m margin_rl.stability.learned.dataset", description=__doc__.split("\n\n")[0]
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    gen = sub.add_parser("generate", help="generate or resume a dataset")
+    gen.add_argument("--robot", required=True, choices=available_robots())
+    gen.add_argument("--n", type=int, required=True, help="number of samples")
+    gen.add_argument("--out", required=True, help="dataset directory")
+    gen.add_argument("--seed", type=int, default=0)
+    gen.add_argument("--shard-size", type=int, default=5000)
+    gen.add_argument("--workers", type=int, default=None, help="local processes (default: all cores)")
+    gen.add_argument("--ray", default=None, metavar="ADDRESS", help="run on Ray: 'auto', 'local' or an address")
+    gen.add_argument("--friction", type=_parse_friction, default="cone", help="'cone' or 'pyramid:K'")
+    gen.add_argument("--focus-tol", type=float, default=AnalyticSettings().focus_tol, help="margin bracket [m]")
+    gen.add_argument(
+        "--labelling",
+        choices=LABELLING_PATHS,
+        default=AnalyticSettings().labelling,
+        help="labelling path: 'batched' (states together, re-used solver structure) or 'per_state' (the reference)",
+    )
+    gen.add_argument(
+        "--distribution",
+        choices=DISTRIBUTION_NAMES,
+        default="table_i",
+        help="state distribution: 'table_i' (seed 000's Table I), 'locomotion' (Table I widened to walking-policy "
+        "states) or 'rollouts' (around the recorded states of --states)",
+    )
+    gen.add_argument("--states", default=None, help="'rollouts': npz of recorded lambdas (key 'lam')")
+    gen.add_argument(
+        "--load-penalty", type=float, default=DEFAULT_LOAD_PENALTY, help="kappa of the extended margin m_x [m]"
+    )
+    gen.add_argument(
+        "--bisection-steps", type=int, default=DEFAULT_BISECTION_STEPS, help="halvings for m_x's load fraction"
+    )
+    gen.add_argument("--quiet", action="store_true")
+    summ = sub.add_parser("summary", help="print the manifest and status counts of a dataset")
+    summ.add_argument("path")
+    args = parser.parse_args(argv)
+
+    if args.command == "summary":
+        ds = load_dataset(args.path)
+        print(json.dumps({k: v for k, v in ds.manifest.items() if k != "fields"}, indent=2))
+        total = sum(ds.counts.values())
+        print(f"{total} samples: " + ", ".join(f"{k} {v} ({v / max(total, 1):.1%})" for k, v in ds.counts.items()))
+        if len(ds.margin):
+            m = ds.margin
+            print(f"ok margins [m]: mean {m.mean():.4f}, std {m.std():.4f}, stable (m >= 0) {np.mean(m >= 0):.1%}")
+        return 0
+
+    spec = DatasetSpec(
+        robot=args.robot,
+        n=args.n,
+        shard_size=args.shard_size,
+        seed=args.seed,
+        settings=AnalyticSettings(friction=args.friction, focus_tol=args.focus_tol, labelling=args.labelling),
+        distribution=args.distribution,
+        states=args.states,
+        states_sha256=sha256_file(args.states) if args.states else None,
+        load_penalty=args.load_penalty,
+        bisection_steps=args.bisection_steps,
+    )
+    arguments = " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
+    command = f"python -m margin_rl.stability.learned.dataset {arguments}"
+    try:
+        generate(spec, args.out, workers=args.workers, ray_address=args.ray, progress=not args.quiet, command=command)
+    except DatasetError as exc:
+        parser.error(str(exc))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

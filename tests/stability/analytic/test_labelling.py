@@ -1,0 +1,146 @@
+"""The batched labelling path (learned margin v2, item 6) against the per-state path it replaces."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from margin_rl.robot import load_robot
+from margin_rl.stability.analytic.contact_batch import contact_batch
+from margin_rl.stability.analytic.margin import (
+    STATUSES,
+    AnalyticSettings,
+    _stance_programs,
+    analytic_margin,
+    analytic_margin_batch,
+    contact_problem,
+)
+from margin_rl.stability.analytic.sampling import sample_states
+from margin_rl.stability.geometry.contact import validate_contact_arrays
+from margin_rl.stability.geometry.region import _build_problem
+from margin_rl.stability.geometry.region_batch import ProgramStructure
+from margin_rl.stability.learned.dataset import DatasetError, DatasetSpec, generate, load_dataset
+
+PER_STATE = AnalyticSettings(labelling="per_state")
+BATCHED = AnalyticSettings(labelling="batched")
+
+
+@pytest.mark.parametrize("robot_name", ["anymal_b", "anymal_c"])
+def test_batched_labels_agree_with_the_per_state_path(robot_name: str) -> None:
+    """Same statuses, margins within the focus bracket (0.5 mm), on random Table I states.
+
+    Both paths solve the same programs in the same order of directions; they differ in rounding (the
+    batch's vectorised assembly and IK, the re-used solver's equilibration), which the focused
+    projection can turn into a different refinement inside its bracket. Measured: max |dm| 0.12-0.3 mm.
+    """
+    lams = sample_states(load_robot(robot_name), 300, seed=17)
+    old = analytic_margin_batch(robot_name, lams, PER_STATE, workers=1)
+    new = analytic_margin_batch(robot_name, lams, BATCHED, workers=1)
+    np.testing.assert_array_equal(new.status, old.status)
+    ok = old.status == STATUSES.index("ok")
+    assert ok.sum() > 100
+    assert np.isnan(new.margin[~ok]).all()
+    assert np.abs(new.margin[ok] - old.margin[ok]).max() < 0.5e-3
+    assert np.median(np.abs(new.margin[ok] - old.margin[ok])) < 1e-5
+
+
+def test_batched_labels_do_not_depend_on_how_the_states_are_cut() -> None:
+    """Every state is solved through the same solver update, so a label is the same in any batch."""
+    lams = sample_states(load_robot("anymal_c"), 40, seed=3)
+    whole = analytic_margin_batch("anymal_c", lams, BATCHED, workers=1)
+    pieces = analytic_margin_batch("anymal_c", lams, BATCHED, workers=1, chunk_size=7)
+    np.testing.assert_array_equal(pieces.status, whole.status)
+    np.testing.assert_array_equal(pieces.margin, whole.margin)
+    np.testing.assert_array_equal(pieces.n_lps, whole.n_lps)
+
+
+def test_contact_batch_matches_the_single_state_problems() -> None:
+    robot = load_robot("anymal_b")
+    lams = sample_states(robot, 30, seed=8)
+    batch = contact_batch(robot, lams)
+    for i, lam in enumerate(lams):
+        problem = contact_problem(robot, lam)
+        if isinstance(problem, tuple):
+            assert not batch.solvable[i]
+            continue
+        assert batch.solvable[i]
+        # The same CoM fixed-point iterate (another iterate differs by ~1e-5 rad), up to rounding.
+        np.testing.assert_allclose(batch.joint_pos[i], problem.joint_pos, atol=1e-12)
+        np.testing.assert_allclose(batch.jacobians[i], problem.jacobians, atol=1e-12)
+        np.testing.assert_allclose(batch.leg_bias[i], problem.leg_bias, atol=1e-9)
+        np.testing.assert_allclose(batch.wrench[i], problem.gravito_inertial_wrench(), atol=1e-9)
+        np.testing.assert_allclose(batch.capture_point[i], problem.capture_point, atol=1e-15)
+        assert batch.com_height[i] == pytest.approx(problem.com_height, abs=1e-15)
+
+
+@pytest.mark.parametrize("friction", [0, 6])
+def test_program_values_are_those_of_the_single_state_assembly(friction: int) -> None:
+    """On the fixed structure, A's values and b equal region._build_problem's of each state (whose A
+    leaves out the entries that happen to be zero)."""
+    robot = load_robot("anymal_c")
+    lams = sample_states(robot, 40, seed=4)
+    batch = contact_batch(robot, lams)
+    n_stance = batch.stance.sum(axis=1)
+    checked = 0
+    for n in (2, 3, 4):
+        states = np.flatnonzero(batch.solvable & (n_stance == n))
+        if states.size == 0:
+            continue
+        structure = ProgramStructure.of(n, 3, friction)
+        values, b = _stance_programs(batch, states, structure, 0.01, 10.0)
+        for j, i in enumerate(states):
+            pts, nrm, jac, lo, hi, bias, _ = validate_contact_arrays(
+                batch.contact_points[i], batch.normals[i], batch.stance[i], batch.jacobians[i], batch.torque_limits,
+                batch.leg_bias[i],
+            )  # fmt: skip
+            w = batch.wrench[i]
+            ref = _build_problem(pts, nrm, batch.mu[i], jac, lo, hi, bias, w[:3], w[3:], friction, 0.01, 10.0)
+            np.testing.assert_array_equal(structure.matrix(values[j]).toarray(), ref.A.toarray())
+            np.testing.assert_array_equal(b[j], ref.b)
+            assert [repr(c) for c in structure.cones()] == [repr(c) for c in ref.cones]
+            checked += 1
+    assert checked > 10
+
+
+def test_focused_projection_refines_a_focus_inside_a_cap() -> None:
+    """A focus between the inner and outer polygon, equally far from a cap's two boundaries, used to be
+    left with a 10 mm bracket (converged False); the cap holding it is now refined."""
+    robot = load_robot("anymal_b")
+    lam = sample_states(robot, 600, seed=3)[144]
+    result = analytic_margin(robot, lam)
+    assert result.status == "ok" and result.region is not None
+    lo, hi = result.region.margin_bounds or (np.nan, np.nan)
+    assert result.region.converged and hi - lo <= AnalyticSettings().focus_tol
+
+
+def test_settings_record_the_labelling_path() -> None:
+    assert AnalyticSettings().labelling == "batched"
+    assert AnalyticSettings().as_dict()["labelling"] == "batched"
+    recorded_before = {k: v for k, v in PER_STATE.as_dict().items() if k != "labelling"}
+    assert AnalyticSettings.from_dict(recorded_before).labelling == "per_state"  # what made those labels
+    with pytest.raises(ValueError, match="labelling must be one of"):
+        AnalyticSettings(labelling="fast")
+
+
+def test_dataset_manifest_names_the_path_and_old_manifests_resume_per_state(tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    spec = DatasetSpec("anymal_c", n=6, shard_size=3, seed=1, settings=BATCHED)
+    generate(spec, out, workers=1, progress=False)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["analytic_settings"]["labelling"] == "batched"
+    assert "--labelling batched" in manifest["command"]
+    assert len(load_dataset(out).margin) > 0
+
+    # A manifest written before the path was recorded: per-state labels.
+    old = tmp_path / "old"
+    generate(DatasetSpec("anymal_c", n=3, shard_size=3, seed=1, settings=PER_STATE), old, workers=1, progress=False)
+    manifest = json.loads((old / "manifest.json").read_text())
+    del manifest["analytic_settings"]["labelling"]
+    (old / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(DatasetError, match="pass --labelling per_state"):
+        generate(DatasetSpec("anymal_c", n=6, shard_size=3, seed=1, settings=BATCHED), old, progress=False)
+    generate(DatasetSpec("anymal_c", n=6, shard_size=3, seed=1, settings=PER_STATE), old, workers=1, progress=False)
+    assert json.loads((old / "manifest.json").read_text())["analytic_settings"]["labelling"] == "per_state"

@@ -1,0 +1,56 @@
+"""The policies shipped with the package (train/bundled/): intact, the right size for their environment, and
+still walking in the current environment (a change of the observation layout or the dynamics breaks them)."""
+
+from __future__ import annotations
+
+import pytest
+
+from margin_rl.train.artifacts.bundle import bundled_names, load_bundle
+from margin_rl.train.artifacts.policies import load_policy
+from margin_rl.train.commands.evaluate import evaluate
+
+SHIPPED = {
+    "anymal_b_v1": "margin_rl/AnymalB-v0",  # the first comparison (v1 learned margin)
+    "anymal_b": "margin_rl/AnymalB-v0",  # issue 17: v2 learned margin, knee clearance
+    "anymal_c": "margin_rl/AnymalC-v0",
+}
+
+
+@pytest.mark.parametrize(("name", "env_id"), sorted(SHIPPED.items()))
+def test_bundle_is_shipped_with_both_variants_and_several_seeds(name: str, env_id: str) -> None:
+    assert name in bundled_names()
+    bundle = load_bundle(name)  # verifies every checksum
+    variants = bundle.variants()
+    assert set(variants) == {"without margin", "with margin"}
+    assert variants["without margin"][0] == 0.0 and variants["with margin"][0] > 0.0
+    assert all(len(policies) >= 3 for _, policies in variants.values())
+    assert bundle.card["settings"]["env_id"] == env_id
+    assert bundle.card["provenance"]["commit"] not in ("", "unknown")
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_bundle_carries_the_learned_margin_its_policies_were_trained_with(name: str) -> None:
+    """The policies' reward used these weights and the card's margin column is measured with them, so the
+    bundle stays reproducible when the package's own weights are retrained."""
+    from margin_rl.stability import LearnedMargin
+
+    bundle = load_bundle(name)  # also checks every policy's recorded weights against the carried copy
+    assert bundle.margin_weights is not None and bundle.margin_weights.is_file()
+    carried = LearnedMargin.load(bundle.margin_weights)
+    for entry in bundle.card["policies"]:
+        assert entry["learned_margin"]["sha256"] == carried.card["sha256"]
+    assert bundle.env_overrides() == {"margin_weights": str(bundle.margin_weights)}
+
+
+@pytest.mark.parametrize("variant", ["without margin", "with margin"])
+@pytest.mark.parametrize(("name", "env_id"), sorted(SHIPPED.items()))
+def test_bundled_policy_walks_at_the_commanded_speed(name: str, env_id: str, variant: str, tmp_path) -> None:
+    bundle = load_bundle(name)
+    _, policies = bundle.variants()[variant]
+    seed, path = policies[0]
+    policy = load_policy(path)
+    assert policy.train_config is not None and policy.train_config["env_id"] == env_id
+    report, _ = evaluate(path, episodes=2, seed=7, forward_velocity=0.75, max_steps=200, out_dir=tmp_path)
+    s = report["summary"]
+    assert s["fell"]["mean"] == 0.0, f"{name}: bundled {variant} policy (seed {seed}) fell within 4 s"
+    assert s["velocity_error_mean"]["mean"] < 0.15, s["velocity_error_mean"]

@@ -1,0 +1,122 @@
+"""compare: both variants, one seed, a tiny budget: PNG, Markdown and JSON with the table's metrics."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from margin_rl.train.commands.compare import main
+from margin_rl.train.metrics import SUMMARY_METRICS
+
+
+def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) -> None:
+    out = tmp_path / "cmp"
+    args = [
+        "--backend", "rsl", "--seeds", "1", "--num-envs", "8", "--total-steps", "192", "--eval-episodes", "2",
+        "--warmup-s", "0.1", "--margin-weight", "2", "--margin-weights", toy_weights, "--out", str(out),
+        "--env-option", "episode_length_s=0.4", "--no-progress",
+    ]  # fmt: skip
+    assert main(args) == 0
+    report = json.loads((out / "compare.json").read_text())
+    assert set(report["variants"]) == {"without margin", "with margin"}
+    assert report["variants"]["without margin"]["margin_weight"] == 0.0
+    assert report["variants"]["with margin"]["margin_weight"] == 2.0
+    for variant in report["variants"].values():
+        assert set(SUMMARY_METRICS) <= set(variant["mean"]) and set(SUMMARY_METRICS) <= set(variant["std"])
+        assert len(variant["runs"]) == 1 and Path(variant["runs"][0]["policy"]).is_file()
+        assert all(v is not None for v in variant["mean"].values())  # finite: the baseline's margin too
+    markdown = (out / "compare.md").read_text()
+    assert "| without margin | 0 |" in markdown and "| with margin | 2 |" in markdown and "compare.png" in markdown
+    assert (out / "compare.png").stat().st_size > 10_000
+    # A second call reuses the finished runs instead of training again.
+    assert main(args) == 0
+    assert len(list((out / "runs").glob("*/checkpoints/*.pt"))) == 2
+
+
+def test_bundle_round_trip_evaluates_like_the_runs(tmp_path: Path, toy_weights: str) -> None:
+    """compare --bundle copies the TorchScript actors with a card; --bundled evaluates them to the same metrics
+    as the rsl-rl checkpoints they were exported from (two independent loaders of one policy), with the
+    learned-margin weights they were trained with even after the original weights file was replaced."""
+    from margin_rl.stability.learned.model import save_weights
+    from margin_rl.train.artifacts.bundle import CARD_FILE, load_bundle
+
+    from tests.stability.learned.test_model import random_weights
+
+    weights = tmp_path / "margin.npz"  # a private copy: it is replaced below
+    for suffix in (".npz", ".json"):
+        weights.with_suffix(suffix).write_bytes(Path(toy_weights).with_suffix(suffix).read_bytes())
+    out, bundle_dir = tmp_path / "cmp", tmp_path / "bundle"
+    args = [
+        "--backend", "rsl", "--seeds", "1", "--num-envs", "8", "--total-steps", "192", "--eval-episodes", "2",
+        "--warmup-s", "0.1", "--margin-weight", "2", "--margin-weights", str(weights), "--out", str(out),
+        "--env-option", "episode_length_s=0.4", "--no-progress", "--bundle", str(bundle_dir),
+    ]  # fmt: skip
+    assert main(args) == 0
+    trained_sha = json.loads(weights.with_suffix(".json").read_text())["sha256"]
+    save_weights(random_weights(seed=1), weights, {"robot": "toy"})  # "retrained" margin weights
+    bundle = load_bundle(bundle_dir)
+    assert {v: (w, [s for s, _ in p]) for v, (w, p) in bundle.variants().items()} == {
+        "without margin": (0.0, [0]),
+        "with margin": (2.0, [0]),
+    }
+    card = json.loads((bundle_dir / CARD_FILE).read_text())
+    assert card["provenance"]["command"].startswith("margin-rl-compare") and card["provenance"]["commit"]
+    assert "| without margin |" in (bundle_dir / "CARD.md").read_text()
+    assert all(e["learned_margin"]["source"] == str(weights) for e in card["policies"])  # margin weights recorded
+    assert card["learned_margin_weights"]["npz_sha256"] == trained_sha  # ... and carried
+    assert bundle.margin_weights is not None and bundle.margin_weights.parent.parent == bundle_dir
+
+    evaluated = tmp_path / "evaluated"
+    assert main(["--bundled", str(bundle_dir), "--out", str(evaluated)]) == 0
+    trained = json.loads((out / "compare.json").read_text())["variants"]
+    from_bundle = json.loads((evaluated / "compare.json").read_text())["variants"]
+    for name, variant in trained.items():
+        for key in SUMMARY_METRICS:
+            a, b = variant["mean"][key], from_bundle[name]["mean"][key]
+            assert (a is None and b is None) or abs(a - b) <= 1e-4 * (1 + abs(a)), (name, key, a, b)
+
+    # Evaluated with the retrained weights instead, the margin column differs: the carried copy mattered.
+    replaced = tmp_path / "replaced"
+    assert main(["--bundled", str(bundle_dir), "--out", str(replaced), "--margin-weights", str(weights)]) == 0
+    margins = json.loads((replaced / "compare.json").read_text())["variants"]["with margin"]["mean"]["margin_mean"]
+    assert abs(margins - from_bundle["with margin"]["mean"]["margin_mean"]) > 1e-3
+
+    # A changed policy or margin file is refused, naming the file.
+    for path in (bundle.runs[0].policy, bundle.margin_weights):
+        original = path.read_bytes()
+        path.write_bytes(original + b"\0")
+        with pytest.raises(ValueError, match=f"{path.name}: checksum mismatch"):
+            load_bundle(bundle_dir)
+        path.write_bytes(original)
+
+
+def test_bundle_refuses_margin_weights_changed_since_training(tmp_path: Path, toy_weights: str) -> None:
+    """A bundle must carry the weights its policies were trained with, not whatever the path holds now."""
+    from margin_rl.stability.learned.model import save_weights
+    from margin_rl.train.artifacts.bundle import copy_margin_weights
+
+    from tests.stability.learned.test_model import random_weights
+
+    weights = tmp_path / "margin"
+    save_weights(random_weights(seed=2), weights, {"robot": "toy"})
+    sha = json.loads(weights.with_suffix(".json").read_text())["sha256"]
+    trained_with = {"source": str(weights.with_suffix(".npz")), "sha256": sha}
+    entries = [{"learned_margin": trained_with}, {"learned_margin": None}]
+    record = copy_margin_weights(entries, tmp_path)
+    assert record is not None and record["npz_sha256"] == sha and (tmp_path / record["npz"]).is_file()
+    assert copy_margin_weights([{"learned_margin": None}], tmp_path) is None
+    save_weights(random_weights(seed=3), weights, {"robot": "toy"})
+    with pytest.raises(ValueError, match="changed since the runs were trained"):
+        copy_margin_weights(entries, tmp_path)
+    other = {"learned_margin": {"source": toy_weights, "sha256": "x"}}
+    with pytest.raises(ValueError, match="different learned-margin weights"):
+        copy_margin_weights([*entries, other], tmp_path)
+
+
+def test_unknown_bundle_is_a_clear_error(tmp_path: Path) -> None:
+    from margin_rl.train.artifacts.bundle import load_bundle
+
+    with pytest.raises(ValueError, match="no policy bundle 'nope'"):
+        load_bundle("nope")

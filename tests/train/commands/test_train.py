@@ -1,0 +1,138 @@
+"""Training through the command line (both backends): outputs, TensorBoard tags, checkpoints, stop and resume."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+from pathlib import Path
+
+import pytest
+import torch
+from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
+
+from margin_rl.train.commands import train as train_module
+from margin_rl.train.runs import latest_checkpoint
+from tests.train.conftest import tiny_args
+
+
+def _scalars(path: Path) -> dict[str, list[int]]:
+    """Tag -> steps of the scalar summaries in one TensorBoard event file."""
+    found: dict[str, list[int]] = {}
+    for event in EventFileLoader(str(path)).Load():
+        for value in event.summary.value:
+            found.setdefault(value.tag, []).append(int(event.step))
+    return found
+
+
+def _event_files(run_dir: Path) -> list[Path]:
+    return sorted((run_dir / "tb").glob("events.out.tfevents.*"), key=lambda p: p.stat().st_mtime)
+
+
+@pytest.mark.parametrize("backend", ["rsl", "sb3"])
+def test_cli_training_writes_config_checkpoints_models_and_tags(backend: str, request: pytest.FixtureRequest) -> None:
+    run_dir: Path = request.getfixturevalue(f"{backend}_run")
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["backend"] == backend and config["env_config"]["margin_weight"] == 0.5
+    assert config["env_config"]["robot"] == "anymal_b" and config["ppo"] and config["backend_config"]
+    progress = json.loads((run_dir / "progress.json").read_text())
+    assert progress["finished"] and progress["env_steps"] == 384
+    assert (run_dir / ("final_model.zip" if backend == "sb3" else "final_model.pt")).is_file()
+    assert (run_dir / "policy_torchscript.pt").is_file()
+    assert latest_checkpoint(run_dir).name == f"ckpt_000000000384.{'zip' if backend == 'sb3' else 'pt'}"
+    tags = set().union(*(_scalars(p) for p in _event_files(run_dir)))
+    for tag in (
+        "Episode_Reward/velocity_tracking",
+        "Episode_Reward/margin",
+        "Episode_Metrics/margin_mean",
+        "Episode_Metrics/lin_acc_rms_x",
+        "Episode_Metrics/lin_acc_peak_z",
+        "Episode_Metrics/ang_acc_rms_y",
+        "Episode_Metrics/velocity_error_mean",
+        "Episode_Metrics/stance_width_mean",
+        "Episode_Termination/fell",
+        "Perf/total_fps",
+    ):
+        assert tag in tags, f"{tag} missing from {sorted(tags)}"
+
+
+def _interrupt_on_first_checkpoint(path: Path, steps: int) -> None:
+    if not getattr(_interrupt_on_first_checkpoint, "sent", False):
+        _interrupt_on_first_checkpoint.sent = True  # type: ignore[attr-defined]
+        os.kill(os.getpid(), signal.SIGINT)
+
+
+@pytest.mark.parametrize("backend", ["rsl", "sb3"])
+def test_sigint_checkpoints_and_resume_continues_the_step_count(
+    backend: str, tmp_path: Path, toy_weights: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run_dir = tmp_path / "run"
+    _interrupt_on_first_checkpoint.sent = False  # type: ignore[attr-defined]
+    original = train_module.train
+    monkeypatch.setattr(
+        train_module, "train", lambda *a, **k: original(*a, **{**k, "on_checkpoint": _interrupt_on_first_checkpoint})
+    )
+    # 8 envs x 24 steps = 192 steps per update; a checkpoint after the first update, then SIGINT.
+    code = train_module.main(tiny_args(backend, run_dir, toy_weights, total=960, every=192))
+    assert code == 128 + signal.SIGINT
+    stopped = json.loads((run_dir / "progress.json").read_text())
+    assert stopped["stopped"] and not stopped["finished"] and stopped["stop_reason"] == "SIGINT"
+    steps_at_stop = stopped["env_steps"]
+    assert 0 < steps_at_stop < 960 and latest_checkpoint(run_dir).name.startswith(f"ckpt_{steps_at_stop:012d}")
+    assert not (run_dir / "final_model.pt").exists() and not (run_dir / "final_model.zip").exists()
+    monkeypatch.setattr(train_module, "train", original)
+
+    with pytest.raises(SystemExit):  # the run directory is taken: only --resume may continue it
+        train_module.main(tiny_args(backend, run_dir, toy_weights, total=960, every=192))
+    assert train_module.main(["--resume", str(run_dir), "--no-progress"]) == 0
+    done = json.loads((run_dir / "progress.json").read_text())
+    assert done["finished"] and done["env_steps"] == 960
+
+    files = _event_files(run_dir)
+    assert len(files) == 2  # one per session, in the same TensorBoard folder
+    first, second = _scalars(files[0]), _scalars(files[1])
+    if backend == "rsl":  # x axis = iteration: the resumed session starts at the next iteration
+        assert max(first["Loss/value"]) == steps_at_stop // 192 - 1
+        assert min(second["Loss/value"]) == steps_at_stop // 192
+        state = torch.load(latest_checkpoint(run_dir), weights_only=True)
+        assert state["infos"]["completed_iterations"] == 5 and state["iter"] == 4
+    else:  # x axis = environment steps
+        assert min(second["time/fps"]) > steps_at_stop >= max(first["time/fps"])
+
+
+def test_missing_margin_weights_is_a_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["--margin-weights", str(tmp_path / "none.npz"), "--run-dir", str(tmp_path / "run"), "--no-progress"]
+    with pytest.raises(SystemExit):
+        train_module.main(args)
+    assert "--margin none" in capsys.readouterr().err and not (tmp_path / "run").exists()
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# command-line defaults: the shipped experiment for the ANYmal ids
+# ---------------------------------------------------------------------------------------------------------------------
+def _spec(*argv: str) -> train_module.TrainSpec:
+    spec, _, _ = train_module.spec_from_args(train_module.build_parser().parse_args(list(argv)))
+    return spec
+
+
+def test_cli_defaults_are_the_shipped_experiment() -> None:
+    config = _spec().env_config  # margin_rl/AnymalB-v0: --margin-weight 0.2 --env-option alive_bonus=0.1
+    assert config.margin_weight == 0.2 and config.alive_bonus == 0.1
+    config = _spec("--env", "margin_rl/AnymalC-v0", "--margin-weight", "0", "--env-option", "alive_bonus=0").env_config
+    assert config.margin_weight == 0.0 and config.alive_bonus == 0.0  # given values win
+    assert _spec("--env-option", "margin_weight=0.7").env_config.margin_weight == 0.7
+    # other ids keep their own defaults; the Python API keeps EnvConfig's
+    assert _spec("--env", "margin_rl/SLIPHopper-v0").env_kwargs == {}
+    assert train_module.make_spec().env_config.margin_weight == 1.0
+    helptext = train_module.build_parser().format_help()
+    assert "--margin-weight 0.2" in helptext and "alive_bonus=0.1" in helptext
+
+
+def test_compare_cli_defaults_are_the_shipped_experiment() -> None:
+    from margin_rl.train.commands.compare import build_parser
+    from margin_rl.train.commands.options import with_training_defaults
+
+    assert build_parser().parse_args([]).margin_weight == 0.2
+    assert "alive_bonus=0.1" in build_parser().format_help()
+    options = with_training_defaults("margin_rl/AnymalB-v0", {"margin": "none"}, margin_weight=False)
+    assert options == {"alive_bonus": 0.1, "margin": "none"}  # the variants set their own margin weights

@@ -1,0 +1,308 @@
+"""Bundled policies: the trained policies of a ``compare`` run, shipped inside the package with a card.
+
+A bundle is a folder ``margin_rl/train/bundled/<name>/`` (or any folder given by path)::
+
+    card.json                        compare settings, command, commit, training time, metrics, sha256 per file
+    CARD.md                          the same for people, with the comparison table
+    <variant>__s<seed>/policy.pt     TorchScript deterministic actor (observations -> actions; no pickle)
+    <variant>__s<seed>/config.json   the training run's config.json: the environment to evaluate it in
+    learned_margin/<robot>.npz/.json the learned-margin weights and card the policies were trained with
+
+``compare --bundle <dir>`` writes one from a finished comparison; ``compare --bundled <name>`` evaluates one
+(the README's main job). Loading verifies every file against the card's checksums, so a truncated or edited
+policy is refused instead of silently evaluated. Carrying its own learned-margin weights keeps a bundle
+reproducible when the package's bundled margin weights are retrained: the policies' actions never depend on
+the margin (it is not a policy observation), but their reward did, and the card's margin column is measured
+with these weights. (``evaluate`` on one bundled ``policy.pt`` uses the package's weights unless given
+``--margin-weights <bundle>/learned_margin/<robot>.npz``.)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from margin_rl.provenance import sha256_file
+from margin_rl.stability.learned.model import LearnedMargin, weights_path
+from margin_rl.train.metrics import summary_table
+from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, TORCHSCRIPT_FILE, read_json, write_json
+
+BUNDLE_ROOT = Path(__file__).resolve().parents[1] / "bundled"
+CARD_FILE = "card.json"
+CARD_MARKDOWN = "CARD.md"
+POLICY_FILE = "policy.pt"
+MARGIN_FOLDER = "learned_margin"
+CARD_FORMAT = 2
+READABLE_CARD_FORMATS = (1, 2)  # format 1: no copy of the learned-margin weights
+
+
+@dataclass(frozen=True)
+class BundledRun:
+    """One bundled policy: its comparison variant, margin weight, training seed and TorchScript file."""
+
+    variant: str
+    margin_weight: float
+    seed: int
+    policy: Path
+
+
+@dataclass(frozen=True)
+class Bundle:
+    """A verified bundle: its card and its policies in card order."""
+
+    name: str
+    path: Path
+    card: dict[str, Any]
+    runs: tuple[BundledRun, ...]
+    margin_weights: Path | None = None  # the learned-margin .npz the policies were trained with (format >= 2)
+
+    def env_overrides(self) -> dict[str, Any]:
+        """EnvConfig overrides that evaluate the policies with the margin they were trained with."""
+        return {} if self.margin_weights is None else {"margin_weights": str(self.margin_weights)}
+
+    def variants(self) -> dict[str, tuple[float, list[tuple[int, Path]]]]:
+        """Variant name -> (margin weight, [(training seed, policy file), ...])."""
+        grouped: dict[str, tuple[float, list[tuple[int, Path]]]] = {}
+        for run in self.runs:
+            grouped.setdefault(run.variant, (run.margin_weight, []))[1].append((run.seed, run.policy))
+        return grouped
+
+
+def bundled_names() -> tuple[str, ...]:
+    """Names of the bundles shipped with the package."""
+    if not BUNDLE_ROOT.is_dir():
+        return ()
+    return tuple(sorted(p.name for p in BUNDLE_ROOT.iterdir() if (p / CARD_FILE).is_file()))
+
+
+def _slug(variant: str) -> str:
+    return variant.replace(" ", "_")
+
+
+def load_bundle(name_or_path: str | Path) -> Bundle:
+    """A bundle by shipped name (see :func:`bundled_names`) or folder, with every file's checksum verified.
+
+    Raises:
+        ValueError: unknown name, missing card or file, checksum mismatch, or an unsupported card format.
+    """
+    folder = Path(name_or_path)
+    if not (folder / CARD_FILE).is_file():
+        folder = BUNDLE_ROOT / str(name_or_path)
+    if not (folder / CARD_FILE).is_file():
+        raise ValueError(
+            f"no policy bundle {str(name_or_path)!r}: shipped bundles are {list(bundled_names())}, or give a folder "
+            f"holding {CARD_FILE} (written by `compare --bundle`)"
+        )
+    card = read_json(folder / CARD_FILE)
+    if card.get("format") not in READABLE_CARD_FORMATS:
+        raise ValueError(
+            f"{folder / CARD_FILE}: card format {card.get('format')!r}, this package reads {READABLE_CARD_FORMATS}"
+        )
+    runs = []
+    for entry in card["policies"]:
+        for key in ("policy", "config"):
+            _verify(folder, entry[key], entry[f"{key}_sha256"])
+        weight, seed = float(entry["margin_weight"]), int(entry["seed"])
+        runs.append(BundledRun(entry["variant"], weight, seed, folder / entry["policy"]))
+    margin = card.get("learned_margin_weights")
+    margin_weights = None
+    if margin is not None:
+        for key in ("npz", "card"):
+            _verify(folder, margin[key], margin[f"{key}_sha256"])
+        margin_weights = folder / margin["npz"]
+        trained_with = {e["learned_margin"]["sha256"] for e in card["policies"] if e.get("learned_margin")}
+        if trained_with - {margin["npz_sha256"]}:
+            raise ValueError(
+                f"{folder / CARD_FILE}: policies were trained with learned-margin weights {sorted(trained_with)}, "
+                f"but the bundle carries {margin['npz_sha256']}; rewrite the bundle with `compare --bundle`"
+            )
+    return Bundle(folder.name, folder, card, tuple(runs), margin_weights)
+
+
+def _verify(folder: Path, relative: str, sha256: str) -> None:
+    """Refuse a bundle file that is missing or differs from the card's checksum."""
+    path = folder / relative
+    if not path.is_file():
+        raise ValueError(f"{folder}: {relative} listed in {CARD_FILE} is missing; reinstall margin_rl")
+    digest = sha256_file(path)
+    if digest != sha256:
+        raise ValueError(
+            f"{path}: checksum mismatch (card {sha256}, file {digest}); the file was changed "
+            "or truncated: reinstall margin_rl or rewrite the bundle with `compare --bundle`"
+        )
+
+
+def copy_margin_weights(entries: list[dict[str, Any]], folder: Path) -> dict[str, Any] | None:
+    """Copy the learned-margin weights (npz + card) that the runs in ``entries`` were trained with into
+    ``folder/learned_margin/``; returns the card record, or None when no run used a learned margin.
+
+    Raises:
+        ValueError: the runs used different weights (one bundle carries one margin model), or the weights
+            changed since training (their checksum no longer matches the one recorded for the runs).
+    """
+    identities = {
+        (e["learned_margin"]["source"], e["learned_margin"]["sha256"]) for e in entries if e["learned_margin"]
+    }
+    if not identities:
+        return None
+    if len(identities) > 1:
+        raise ValueError(f"the runs were trained with different learned-margin weights {sorted(identities)}")
+    ((source, sha256),) = identities
+    npz = weights_path(source)
+    if LearnedMargin.load(npz).card.get("sha256") != sha256:
+        raise ValueError(
+            f"{npz} changed since the runs were trained with it (sha256 {sha256}); the bundle must carry the "
+            "weights the policies were trained with: restore them or retrain the policies"
+        )
+    (folder / MARGIN_FOLDER).mkdir(exist_ok=True)
+    record: dict[str, Any] = {"source": source}
+    for key, path in (("npz", npz), ("card", npz.with_suffix(".json"))):
+        relative = f"{MARGIN_FOLDER}/{path.name}"
+        shutil.copyfile(path, folder / relative)
+        record[key], record[f"{key}_sha256"] = relative, sha256_file(folder / relative)
+    return record
+
+
+def margin_model_identity(run_config: dict[str, Any]) -> dict[str, Any] | None:
+    """Which learned margin a run's environment used: {"source": robot name or weights path, "sha256": of the
+    weights}, or None when the run used no learned margin. Stored per policy in the card, so that evaluating
+    a bundled policy with other margin weights than it was trained with can be detected."""
+    env = run_config.get("env_config") or {}
+    if env.get("margin") != "learned":
+        return None
+    source = env.get("margin_weights") or env["robot"]
+    return {"source": source, "sha256": LearnedMargin.load(source).card.get("sha256")}
+
+
+def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path, Path, dict[str, Any]]:
+    """(TorchScript file, config.json, training facts) of one compare run; clear error when unfinished."""
+    run_dir = Path(run["run_dir"])
+    policy, config = run_dir / TORCHSCRIPT_FILE, run_dir / CONFIG_FILE
+    for path in (policy, config):
+        if not path.is_file():
+            raise ValueError(f"{path} is missing: the run of {variant!r}, seed {run['seed']} has not finished")
+    progress = read_json(run_dir / PROGRESS_FILE) if (run_dir / PROGRESS_FILE).is_file() else {}
+    run_config = read_json(config)
+    sessions = run_config.get("sessions", [])
+    facts = {
+        "variant": variant,
+        "margin_weight": weight,
+        "seed": int(run["seed"]),
+        "env_steps": progress.get("env_steps"),
+        "training_sessions": len(sessions),
+        "steps_per_s_last_session": progress.get("session_steps_per_s"),
+        "learned_margin": margin_model_identity(run_config),
+        "metrics": run["metrics"],
+    }
+    return policy, config, facts
+
+
+def write_bundle(report: dict[str, Any], dest: str | Path, provenance: dict[str, Any]) -> Path:
+    """Copy the TorchScript actors and run configs of a finished ``compare`` report into ``dest``, with a card.
+
+    ``provenance``: what produced the report (command, commit, wall time, machine), written into the card.
+    The bundle is assembled in a temporary sibling folder and moved into place, so an interrupted write
+    leaves the previous bundle (if any) intact.
+    """
+    dest = Path(dest)
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", dir=dest.parent))
+    try:
+        entries = []
+        for variant, data in report["variants"].items():
+            for run in data["runs"]:
+                policy, config, facts = _run_record(run, variant, float(data["margin_weight"]))
+                folder = f"{_slug(variant)}__s{facts['seed']}"
+                (staging / folder).mkdir()
+                shutil.copyfile(policy, staging / folder / POLICY_FILE)
+                shutil.copyfile(config, staging / folder / CONFIG_FILE)
+                entries.append(
+                    {
+                        **facts,
+                        "policy": f"{folder}/{POLICY_FILE}",
+                        "config": f"{folder}/{CONFIG_FILE}",
+                        "policy_sha256": sha256_file(staging / folder / POLICY_FILE),
+                        "config_sha256": sha256_file(staging / folder / CONFIG_FILE),
+                    }
+                )
+        card = {
+            "format": CARD_FORMAT,
+            "name": dest.name,
+            "settings": report["settings"],
+            "env_options": report.get("env_options", {}),
+            "provenance": provenance,
+            "table": {
+                name: {"margin_weight": v["margin_weight"], "mean": v["mean"], "std": v["std"]}
+                for name, v in report["variants"].items()
+            },
+            "policies": entries,
+            "learned_margin_weights": copy_margin_weights(entries, staging),
+        }
+        write_json(staging / CARD_FILE, card)
+        (staging / CARD_MARKDOWN).write_text(card_markdown(card))
+        os.chmod(staging, 0o755)
+        _replace_folder(staging, dest)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    return dest
+
+
+def _replace_folder(new: Path, dest: Path) -> None:
+    """Move ``new`` to ``dest``; an existing ``dest`` is moved aside first and deleted only afterwards."""
+    old = None
+    if dest.exists():
+        old = dest.with_name(f".{dest.name}.old")
+        shutil.rmtree(old, ignore_errors=True)
+        os.replace(dest, old)
+    try:
+        os.replace(new, dest)
+    except BaseException:
+        if old is not None:
+            os.replace(old, dest)
+        raise
+    if old is not None:
+        with contextlib.suppress(OSError):
+            shutil.rmtree(old)
+
+
+def card_markdown(card: dict[str, Any]) -> str:
+    """The card for people: what was trained, how, from which commit, and the measured table."""
+    s, p = card["settings"], card["provenance"]
+    lines = [
+        f"# Policy bundle `{card['name']}`",
+        "",
+        f"PPO ({s['backend']}) on `{s['env_id']}`, {len(s['seeds'])} training seeds {s['seeds']} per variant, "
+        f"{s['total_steps']:,} environment steps per run on {s['num_envs']} environments; environment options "
+        f"`{card['env_options']}`.",
+        "",
+        f"- command: `{p.get('command', '?')}`",
+        f"- package commit: `{p.get('commit', '?')}`",
+        f"- machine: {p.get('machine', '?')}",
+        f"- wall time of the comparison (training and evaluation): {p.get('wall_time_s', float('nan')) / 60:.1f} min",
+        *([f"- note: {p['note']}"] if p.get("note") else []),
+        *(
+            [
+                f"- learned margin: `{m['npz']}` (sha256 {m['npz_sha256'][:12]}, copied from `{m['source']}`), the "
+                "weights these policies were trained with; `compare --bundled` measures the margin with them"
+            ]
+            if (m := card.get("learned_margin_weights"))
+            else []
+        ),
+        "",
+        f"Evaluation: {s['eval_episodes']} deterministic episodes from seed {s['eval_seed']}, command "
+        f"{s['forward_velocity']:g} m/s, accelerations after {s['warmup_s']:g} s; mean ± std over training seeds.",
+        "",
+    ]
+    lines += summary_table(card["table"])
+    lines += ["", "| policy | margin weight | seed | env steps | sha256 (first 12) |", "|---|---|---|---|---|"]
+    for e in card["policies"]:
+        steps = f"{e['env_steps']:,}" if e.get("env_steps") is not None else "?"
+        digest = e["policy_sha256"][:12]
+        lines.append(f"| `{e['policy']}` | {e['margin_weight']:g} | {e['seed']} | {steps} | {digest} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,382 @@
+"""``compare``: PPO without and with the stability-margin reward, over seeds, on the same budget (seed 000 §V-C).
+
+Example::
+
+    python -m margin_rl.train compare --env margin_rl/AnymalB-v0 --backend rsl --seeds 3 \\
+        --total-steps 5000000 --margin-weight 0.2 --env-option alive_bonus=0.1 --out runs/compare_b
+
+For the ANYmal ids, ``--margin-weight`` defaults to 0.2 and ``--env-option alive_bonus`` to 0.1 for both
+variants: the shipped experiment (see :mod:`margin_rl.train.commands.options`).
+
+For each variant (margin weight 0, and ``--margin-weight``) and each training seed, a run is trained into
+``<out>/runs/mw<weight>__s<seed>`` (a finished run is reused, a stopped one resumed), then evaluated on the same
+fixed command and the same evaluation seeds. Both variants use the same margin model, so the margin is
+measured for the baseline too. Outputs in ``<out>``:
+
+* ``compare.png``: Fig. 9-style base acceleration over an evaluation episode (blue without, red with margin),
+  per base-frame axis, from the first training seed and the first evaluation episode;
+* ``compare.md`` and ``compare.json``: mean ± std over training seeds (each seed's value is its mean over the
+  evaluation episodes) of velocity tracking error, base linear and angular acceleration RMS, stance width,
+  margin and falls, with every run's numbers in the JSON. A metric an evaluation could not compute (e.g. the
+  acceleration RMS of episodes shorter than ``--warmup-s``) is ``null`` there with its reason in the run's
+  ``"not_computed": {metric: reason}`` and listed under the Markdown table (both only when it happens); and, per
+  metric, the difference with − without margin over the training seeds with a two-sided Welch test, the interval
+  that inverts it and a bootstrap interval (``"statistics"`` in the JSON, a second table in the Markdown;
+  :mod:`margin_rl.train.analysis.significance`).
+
+Push recovery of the same policies: :mod:`margin_rl.train.commands.push_recovery` (``--bundled NAME`` or ``--variant``).
+
+``--bundle DIR`` then copies the runs' TorchScript actors and configs, and the learned-margin weights they were
+trained with, into a policy bundle with a card (:mod:`margin_rl.train.artifacts.bundle`); ``--bundled NAME`` trains
+nothing
+and evaluates a bundle the same way, with the bundle's margin weights, e.g. the shipped ANYmal B policies (the
+README's main job)::
+
+    python -m margin_rl.train compare --bundled anymal_b_v1 --out results/anymal_b_v1
+
+With ``--bundled``, ``--env-option``/``--margin-weights`` change the evaluation environment (other terrain, the
+package's current margin weights, ...); the card's table then need not be reproduced.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from margin_rl.provenance import git_commit
+from margin_rl.train.analysis.media import plot_accelerations
+from margin_rl.train.analysis.significance import RESAMPLES, compare_variants, difference_table
+from margin_rl.train.artifacts.bundle import load_bundle, write_bundle
+from margin_rl.train.commands.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate
+from margin_rl.train.commands.options import (
+    CLI_MARGIN_WEIGHT,
+    DEFAULTS_HELP,
+    add_env_arguments,
+    env_overrides,
+    with_training_defaults,
+)
+from margin_rl.train.commands.train import DEFAULT_BACKEND, DEFAULT_NUM_ENVS, TrainSpec, make_spec, train
+from margin_rl.train.environments import DEFAULT_ENV
+from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
+from margin_rl.train.runs import (
+    CONFIG_FILE,
+    PROGRESS_FILE,
+    final_model_name,
+    find_run_config,
+    read_json,
+    versions,
+    write_json,
+)
+
+
+@dataclass(frozen=True)
+class CompareSettings:
+    """What ``compare`` trains and how it evaluates."""
+
+    env_id: str = DEFAULT_ENV
+    backend: str = DEFAULT_BACKEND
+    margin_weight: float = 1.0  # weight of the "with margin" variant (the other is 0)
+    seeds: tuple[int, ...] = (0, 1, 2)  # training seeds
+    num_envs: int = DEFAULT_NUM_ENVS
+    total_steps: int = 5_000_000  # per run
+    checkpoint_every: int = 500_000
+    eval_episodes: int = 4
+    eval_seed: int = 1000  # the same evaluation seeds for every policy
+    forward_velocity: float = DEFAULT_FORWARD_VELOCITY  # the same command for every policy [m/s]
+    warmup_s: float = 1.0
+    device: str = "cpu"
+
+    def __post_init__(self) -> None:
+        if self.margin_weight <= 0:
+            raise ValueError(f"--margin-weight must be > 0 (the baseline uses 0), got {self.margin_weight}")
+        if not self.seeds:
+            raise ValueError("at least one seed is needed")
+
+    def variants(self) -> dict[str, float]:
+        """Variant name -> margin weight."""
+        return {"without margin": 0.0, "with margin": self.margin_weight}
+
+
+def _run_spec(settings: CompareSettings, weight: float, seed: int, overrides: dict[str, Any]) -> TrainSpec:
+    return make_spec(
+        settings.env_id,
+        settings.backend,
+        {**overrides, "margin_weight": weight},
+        None,
+        seed=seed,
+        num_envs=settings.num_envs,
+        total_steps=settings.total_steps,
+        checkpoint_every=settings.checkpoint_every,
+        device=settings.device,
+    )
+
+
+def _train_or_reuse(spec: TrainSpec, run_dir: Path, progress: bool) -> Path:
+    """Train a run, resume a stopped one, or reuse a finished one; returns its final model."""
+    final = run_dir / final_model_name(spec.backend)
+    finished = (run_dir / PROGRESS_FILE).is_file() and read_json(run_dir / PROGRESS_FILE).get("finished")
+    if finished and final.is_file():
+        print(f"reusing finished run {run_dir}")
+        return final
+    resume = (run_dir / CONFIG_FILE).is_file()
+    result = train(spec, run_dir, resume=resume, progress=progress)
+    if result.stopped or result.final_model is None:
+        raise KeyboardInterrupt(f"training of {run_dir} was stopped; run compare again to resume it")
+    return result.final_model
+
+
+def run_compare(
+    settings: CompareSettings, out: str | Path, env_options: dict[str, Any] | None = None, progress: bool = True
+) -> dict[str, Any]:
+    """Train and evaluate every (variant, seed); write compare.png/.md/.json into ``out``; returns the JSON."""
+    out = Path(out)
+    overrides = dict(env_options or {})
+    variants: dict[str, tuple[float, list[tuple[int, Path]]]] = {}
+    for name, weight in settings.variants().items():
+        for seed in settings.seeds:
+            run_dir = out / "runs" / f"mw{weight:g}__s{seed}"
+            final = _train_or_reuse(_run_spec(settings, weight, seed, overrides), run_dir, progress)
+            variants.setdefault(name, (weight, []))[1].append((seed, final))
+    return evaluate_variants(variants, settings, out, overrides)
+
+
+def evaluate_variants(
+    variants: dict[str, tuple[float, list[tuple[int, Path]]]],
+    settings: CompareSettings,
+    out: str | Path,
+    env_options: dict[str, Any] | None = None,
+    eval_env_overrides: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Evaluate every variant's policies on the same command and seeds; write compare.png/.md/.json into ``out``.
+
+    ``variants``: name -> (margin weight, [(training seed, policy file), ...]). A policy inside a run directory
+    is evaluated into ``<run>/eval``, any other (e.g. a bundled one) into ``<out>/eval/<variant>__s<seed>``.
+    ``env_options``: the options the runs were trained with (recorded); ``eval_env_overrides``: EnvConfig fields
+    changed for the evaluation only (a bundle's own learned-margin weights). With both variants, the report's
+    ``"statistics"`` holds, per table metric, "with margin" against "without margin" over the training seeds
+    (:func:`margin_rl.train.analysis.significance.compare_seeds` as a dict).
+    """
+    out = Path(out)
+    report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": dict(env_options or {})}
+    if eval_env_overrides:
+        report["eval_env_overrides"] = dict(eval_env_overrides)
+    report["variants"] = {}
+    examples: dict[str, Evaluation] = {}
+    for name, (weight, policies) in variants.items():
+        runs = []
+        for seed, policy in policies:
+            config = find_run_config(policy, levels=1)
+            in_run = config is not None and (config.parent / PROGRESS_FILE).is_file()
+            eval_dir = config.parent / "eval" if in_run else out / "eval" / f"{name.replace(' ', '_')}__s{seed}"
+            metrics, evaluation = evaluate(
+                policy,
+                env_overrides=eval_env_overrides,
+                episodes=settings.eval_episodes,
+                seed=settings.eval_seed,
+                forward_velocity=settings.forward_velocity,
+                warmup_s=settings.warmup_s,
+                out_dir=eval_dir,
+            )
+            examples.setdefault(name, evaluation)
+            summary = {k: v["mean"] for k, v in metrics["summary"].items()}
+            run_dir = str(config.parent) if in_run else None
+            runs.append({"seed": seed, "run_dir": run_dir, "policy": str(policy), "metrics": summary})
+            if metrics.get("not_computed"):  # null in "metrics": say why (present only then)
+                runs[-1]["not_computed"] = metrics["not_computed"]
+        table = {key: mean_std([r["metrics"][key] for r in runs]) for key in SUMMARY_METRICS}
+        report["variants"][name] = {
+            "margin_weight": weight,
+            "runs": runs,
+            "mean": {k: v[0] for k, v in table.items()},
+            "std": {k: v[1] for k, v in table.items()},
+        }
+    if {"without margin", "with margin"} <= set(report["variants"]):
+        differences = compare_variants(report["variants"], "without margin", "with margin")
+        report["statistics"] = {metric: asdict(difference) for metric, difference in differences.items()}
+    out.mkdir(parents=True, exist_ok=True)
+    report["plot"] = plot_accelerations(examples, out / "compare.png", settings).name
+    report["table"] = write_markdown(report, out / "compare.md").name
+    write_json(out / "compare.json", report)
+    return report
+
+
+def _settings_json(settings: CompareSettings) -> dict[str, Any]:
+    data = asdict(settings)
+    data["seeds"] = list(settings.seeds)
+    return data
+
+
+def write_markdown(report: dict[str, Any], path: Path) -> Path:
+    """The comparison table (mean ± std over training seeds) as Markdown, then, when the report has
+    ``"statistics"``, the differences with − without margin with their interval and test."""
+    s = report["settings"]
+    lines = [
+        f"# Margin reward comparison: {s['env_id']} ({s['backend']})",
+        "",
+        f"{len(s['seeds'])} training seed(s) {s['seeds']}, {s['total_steps']:,} environment steps each, "
+        f"{s['num_envs']} environments; evaluation: {s['eval_episodes']} deterministic episode(s) from seed "
+        f"{s['eval_seed']}, command {s['forward_velocity']:g} m/s, accelerations after the first "
+        f"{s['warmup_s']:g} s. Values: mean ± std over training seeds of each seed's mean over its episodes.",
+        "",
+    ]
+    lines += summary_table(report["variants"])
+    missing = [
+        f"- {key} ({name}, seed {run['seed']}): {reason}"
+        for name, variant in report["variants"].items()
+        for run in variant["runs"]
+        for key, reason in run.get("not_computed", {}).items()
+        if key in SUMMARY_METRICS
+    ]
+    if missing:
+        lines += ["", "Not computed (n/a, or left out of a mean):", *missing]
+    if report.get("statistics"):
+        rows = [((SUMMARY_METRICS.get(k, k),), difference) for k, difference in report["statistics"].items()]
+        lines += [
+            "",
+            "Differences with − without margin over training seeds (the unit: one seed's mean over its episodes): "
+            "two-sided Welch t-test and the interval that inverts it, and a percentile bootstrap interval "
+            f"({RESAMPLES:,} resamples of each variant's seeds; narrower than its nominal level with a few seeds). "
+            "With a few seeds a test has little power: not significant is not no difference.",
+            "",
+            *difference_table(rows, difference_header="difference (with − without)"),
+        ]
+    lines += ["", f"![base acceleration]({report['plot']})", ""]
+    path.write_text("\n".join(lines))
+    return path
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="margin-rl-compare", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    add_env_arguments(parser)
+    d = CompareSettings()
+    parser.add_argument("--backend", choices=("rsl", "sb3"), default=d.backend)
+    parser.add_argument(
+        "--margin-weight",
+        type=float,
+        default=CLI_MARGIN_WEIGHT,
+        help=f"weight of the margin variant (default {CLI_MARGIN_WEIGHT:g}); {DEFAULTS_HELP}",
+    )
+    parser.add_argument("--seeds", type=int, default=len(d.seeds), help="number of training seeds (0, 1, ...)")
+    parser.add_argument("--num-envs", type=int, default=d.num_envs)
+    parser.add_argument("--total-steps", type=int, default=d.total_steps, help="environment steps per run")
+    parser.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
+    parser.add_argument("--eval-episodes", type=int, help=f"evaluation episodes per policy (default {d.eval_episodes})")
+    parser.add_argument("--eval-seed", type=int, help=f"seed of the evaluation episodes (default {d.eval_seed})")
+    parser.add_argument("--forward-velocity", type=float, help=f"command [m/s] (default {d.forward_velocity:g})")
+    parser.add_argument("--warmup-s", type=float, help=f"seconds left out of accelerations (default {d.warmup_s:g})")
+    parser.add_argument("--device", default=d.device)
+    parser.add_argument("--out", type=Path, help="output folder (default runs/compare__<env>__<backend>)")
+    parser.add_argument(
+        "--bundle", type=Path, metavar="DIR", help="after the comparison, write its policies and a card into DIR"
+    )
+    parser.add_argument(
+        "--bundled",
+        metavar="NAME",
+        help="train nothing: evaluate a policy bundle (shipped name, e.g. anymal_b, or a folder) with the "
+        "evaluation settings of its card unless given here",
+    )
+    parser.add_argument("--no-progress", action="store_true")
+    return parser
+
+
+_EVAL_OPTIONS = ("eval_episodes", "eval_seed", "forward_velocity", "warmup_s")
+
+
+def _eval_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    return {k: getattr(args, k) for k in _EVAL_OPTIONS if getattr(args, k) is not None}
+
+
+def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
+    return CompareSettings(
+        env_id=args.env or DEFAULT_ENV,
+        backend=args.backend,
+        margin_weight=args.margin_weight,
+        seeds=tuple(range(args.seeds)),
+        num_envs=args.num_envs,
+        total_steps=args.total_steps,
+        checkpoint_every=args.checkpoint_every,
+        device=args.device,
+        **_eval_overrides(args),
+    )
+
+
+def run_bundled(
+    name: str,
+    out: str | Path,
+    eval_overrides: dict[str, Any] | None = None,
+    env_overrides: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Evaluate a policy bundle (see :mod:`margin_rl.train.artifacts.bundle`) like ``compare`` evaluates its runs.
+
+    ``eval_overrides``: CompareSettings evaluation fields replacing the card's; ``env_overrides``: EnvConfig
+    fields for the evaluation (e.g. rough terrain, or other learned-margin weights than the bundle's own).
+    """
+    bundle = load_bundle(name)
+    stored = dict(bundle.card["settings"])
+    stored["seeds"] = tuple(stored["seeds"])
+    settings = CompareSettings(**{**stored, **dict(eval_overrides or {})})
+    overrides = {**bundle.env_overrides(), **dict(env_overrides or {})}
+    report = evaluate_variants(bundle.variants(), settings, out, bundle.card.get("env_options"), overrides)
+    report["bundle"] = {"name": bundle.name, "path": str(bundle.path), "card_table": bundle.card["table"]}
+    write_json(Path(out) / "compare.json", report)
+    return report
+
+
+def _provenance(command: list[str], wall_time_s: float) -> dict[str, Any]:
+    cpuinfo = Path("/proc/cpuinfo")
+    lines = cpuinfo.read_text().splitlines() if cpuinfo.is_file() else []
+    names = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
+    cpu = names[0] if names else platform.processor() or platform.machine()
+    machine = f"{cpu}, {os.cpu_count()} logical cores, {platform.system()}"
+    return {
+        "command": " ".join(command),
+        "commit": git_commit(),
+        "machine": machine,
+        "wall_time_s": wall_time_s,
+        "versions": versions(),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    command = ["margin-rl-compare", *(sys.argv[1:] if argv is None else argv)]
+    env_id = args.env or DEFAULT_ENV
+    t0 = time.perf_counter()
+    try:
+        if args.bundled is not None:
+            out = args.out or Path("results") / f"bundled__{Path(args.bundled).name}"
+            options = env_overrides(args)
+            options.pop("margin_weight", None)  # the bundle's variants fix their weights
+            report = run_bundled(args.bundled, out, _eval_overrides(args), options)
+        else:
+            settings = _settings_from_args(args)
+            options = env_overrides(args)
+            options.pop("margin_weight", None)  # each variant sets its own
+            options = with_training_defaults(env_id, options, margin_weight=False)
+            out = args.out or Path("runs") / f"compare__{env_id.split('/')[-1]}__{args.backend}"
+            report = run_compare(settings, out, options, progress=not args.no_progress)
+            if args.bundle is not None:
+                write_bundle(report, args.bundle, _provenance(command, time.perf_counter() - t0))
+                print(f"wrote the policy bundle {args.bundle}")
+    except (ValueError, TypeError) as exc:
+        parser.error(str(exc))
+    except KeyboardInterrupt as exc:
+        print(f"\n{exc or 'interrupted'}", file=sys.stderr)
+        return 130
+    print(Path(out / report["table"]).read_text())
+    print(f"wrote {out / 'compare.png'}, {out / 'compare.md'}, {out / 'compare.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,593 @@
+"""``train``: PPO (rsl-rl or Stable-Baselines3) on a margin_rl ANYmal environment or any Gymnasium id.
+
+Examples::
+
+    python -m margin_rl.train train --env margin_rl/AnymalB-v0 --backend rsl --margin-weight 0.2 --seed 1 \\
+        --num-envs 128 --total-steps 5000000 --env-option alive_bonus=0.1    # the defaults, written out
+    python -m margin_rl.train train --backend sb3 --margin-weight 0 --run-dir runs/baseline
+    python -m margin_rl.train train --resume runs/baseline            # continue a stopped or killed run
+    python -m margin_rl.train train --resume runs/baseline --total-steps 10000000   # ... and extend it
+    python -m margin_rl.train train --env margin_rl/AnymalB-Rough-v0 --margin-weight 0 --total-steps 3000000 \
+        --init-from runs/baseline/final_model.pt --run-dir runs/baseline_rough    # fine-tune a flat policy
+    python -m margin_rl.train train --env margin_rl/SLIPHopper-v0 --backend sb3 --margin-weight 0.5 \\
+        --num-envs 8 --total-steps 20000 --env-option goal_velocity=0.5
+
+Environments: the ANYmal ids (batched ``vector_entry_point``) run on the batched core with an ``EnvConfig``
+(``--env-option`` sets its fields; ``--margin``, ``--margin-weights``, ``--reward-preset``, ``--margin-weight``
+too), with either backend. Every other registered id takes the generic path (SB3 only, the default backend
+there; ``--backend rsl`` is an error): SB3's ``DummyVecEnv`` of ``gymnasium.make(id, **env_kwargs)``, where
+``--env-option KEY=VALUE`` sets a constructor keyword of the environment (or ``max_episode_steps``) and
+``--margin-weight`` its ``margin_weight`` keyword when it has one (``margin_rl/SLIPHopper-v0`` does); other
+names are an error listing the keywords it takes. See :mod:`margin_rl.train.environments`.
+
+Defaults for the ANYmal ids: the shipped, working experiment of the README and ``bundled/anymal_b_v1/CARD.md``,
+``--margin-weight 0.2`` and ``--env-option alive_bonus=0.1`` unless given (:mod:`margin_rl.train.commands.options`;
+``make_spec`` and ``EnvConfig`` keep the paper's reward: weight 1, no bonus).
+
+Each run directory (default ``runs/<env>__<backend>__mw<weight>__s<seed>__<time>``, without ``mw<weight>``
+for an environment without a margin weight) holds ``config.json`` (environment: ``env_config`` for ANYmal,
+``env_kwargs`` otherwise; PPO and run settings, package versions; ``--resume`` and ``evaluate`` rebuild the
+environment from it), TensorBoard events in ``tb/`` (ANYmal: every reward term, the margin, base linear/angular
+acceleration RMS and peak per axis, velocity-tracking error, stance width, terminations; generic: episode
+return and length, ``Episode_Reward/<term>`` for every ``info["reward_<term>"]``, means of the other numeric
+``info`` values, terminations; both: throughput and SB3's or rsl-rl's own losses), checkpoints in
+``checkpoints/`` (every ``--checkpoint-every`` steps, and on SIGINT/SIGTERM), and at the end
+``final_model.pt|.zip`` plus ``policy_torchscript.pt`` (deterministic actor). See :mod:`margin_rl.train.runs`
+for the layout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from margin_rl.envs.config import EnvConfig
+from margin_rl.provenance import sha256_file
+from margin_rl.train.backends.rsl import rsl_vec_env, train_rsl
+from margin_rl.train.backends.sb3 import sb3_vec_env, train_sb3
+from margin_rl.train.commands import options as cli
+from margin_rl.train.config import (
+    BACKENDS,
+    PPOConfig,
+    RslPPOConfig,
+    Sb3PPOConfig,
+    apply_overrides,
+    default_ppo_config,
+    from_dict,
+    parse_assignments,
+    to_dict,
+)
+from margin_rl.train.environments import (
+    DEFAULT_ENV,
+    AnymalTarget,
+    EnvTarget,
+    GymTarget,
+    env_target,
+    is_batched_anymal,
+)
+from margin_rl.train.runs import (
+    CONFIG_FILE,
+    PROGRESS_FILE,
+    TORCHSCRIPT_FILE,
+    RunHooks,
+    StopRequest,
+    checkpoint_steps,
+    final_model_name,
+    graceful_stop,
+    latest_checkpoint,
+    read_json,
+    run_name,
+    torch_threads,
+    versions,
+    write_json,
+)
+
+DEFAULT_BACKEND = "rsl"  # for ANYmal ids; the generic path has only "sb3"
+GENERIC_BACKEND = "sb3"
+DEFAULT_SEED = 1
+DEFAULT_NUM_ENVS = 128
+DEFAULT_TOTAL_STEPS = 5_000_000
+DEFAULT_CHECKPOINT_EVERY = 500_000
+
+
+def _generic_backend_error(env_id: str, backend: str) -> ValueError:
+    return ValueError(
+        f"{env_id} is not a batched margin_rl ANYmal environment, and the {backend} backend trains only those: "
+        f"train it with --backend {GENERIC_BACKEND}"
+    )
+
+
+@dataclass(frozen=True)
+class TrainSpec:
+    """Everything that defines a training run (written to ``config.json``).
+
+    The environment is either a batched ANYmal one, ``env_config`` (``EnvConfig()`` when neither is given), or
+    a generic Gymnasium one, ``env_kwargs``: the keyword overrides of ``gymnasium.make(env_id, ...)`` (JSON
+    values, copied; see :func:`margin_rl.train.environments.env_kwargs_for`). Build specs with :func:`make_spec`,
+    which picks the kind from the id's registration.
+    """
+
+    env_id: str = DEFAULT_ENV
+    backend: str = DEFAULT_BACKEND
+    seed: int = DEFAULT_SEED
+    num_envs: int = DEFAULT_NUM_ENVS
+    total_steps: int = DEFAULT_TOTAL_STEPS  # environment steps (policy steps summed over environments)
+    env_config: EnvConfig | None = None  # ANYmal ids
+    ppo: PPOConfig = field(default_factory=RslPPOConfig)
+    checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY  # environment steps between checkpoints
+    device: str = "cpu"  # learner device (the simulation always runs on the CPU)
+    env_kwargs: dict[str, Any] | None = field(default=None, hash=False)  # other ids (a dict cannot be hashed)
+    # Warm start: the network weights of this trained model (rsl-rl .pt checkpoint or final model, SB3 .zip) are the
+    # run's first weights; steps, optimizer and learning-rate schedule start fresh. None: random initialisation.
+    init_from: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.env_config is not None and self.env_kwargs is not None:
+            raise ValueError("a TrainSpec has either env_config (ANYmal ids) or env_kwargs (other ids), not both")
+        if self.env_kwargs is None and self.env_config is None:
+            object.__setattr__(self, "env_config", EnvConfig())  # frozen: set once, here
+        if self.env_kwargs is not None:  # a private JSON copy: the spec never shares the caller's dict
+            object.__setattr__(self, "env_kwargs", json.loads(json.dumps(self.env_kwargs, allow_nan=False)))
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
+        if self.env_kwargs is not None and self.backend != GENERIC_BACKEND:
+            raise _generic_backend_error(self.env_id, self.backend)
+        expected = RslPPOConfig if self.backend == "rsl" else Sb3PPOConfig
+        if not isinstance(self.ppo, expected):
+            raise TypeError(f"backend {self.backend!r} needs a {expected.__name__}, got {type(self.ppo).__name__}")
+        for name in ("num_envs", "total_steps", "checkpoint_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.init_from is not None and not isinstance(self.init_from, str):
+            raise TypeError(f"init_from must be None or a path (str), got {self.init_from!r}")
+
+    @property
+    def is_anymal(self) -> bool:
+        """True for a batched ANYmal environment (``env_config``), False for a generic one (``env_kwargs``)."""
+        return self.env_kwargs is None
+
+    @property
+    def target(self) -> EnvTarget:
+        """The spec's environment: :class:`AnymalTarget` (``env_config``) or :class:`GymTarget` (``env_kwargs``)."""
+        if self.is_anymal:
+            return AnymalTarget(self.env_id, self.env_config)
+        return GymTarget(self.env_id, dict(self.env_kwargs))
+
+    @property
+    def steps_per_iteration(self) -> int:
+        """Environment steps collected per PPO update."""
+        return self.num_envs * self.ppo.steps_per_env
+
+    @property
+    def total_iterations(self) -> int:
+        """PPO updates needed for ``total_steps`` (rounded up)."""
+        return math.ceil(self.total_steps / self.steps_per_iteration)
+
+    @property
+    def save_interval(self) -> int:
+        """Iterations between checkpoints."""
+        return max(1, round(self.checkpoint_every / self.steps_per_iteration))
+
+    def backend_config(self, run: str = "") -> dict[str, Any]:
+        """The exact settings handed to the backend (the rsl-rl ``train_cfg`` or SB3's PPO keyword arguments)."""
+        if isinstance(self.ppo, RslPPOConfig):  # rsl runs are ANYmal runs (__post_init__)
+            assert self.env_config is not None
+            return self.ppo.runner_cfg(self.env_config.privileged_observations, self.save_interval, run)
+        kwargs = self.ppo.ppo_kwargs(self.num_envs)
+        policy = dict(kwargs.pop("policy_kwargs"))
+        policy["activation_fn"] = policy["activation_fn"].__name__
+        return {**kwargs, "policy_kwargs": policy}
+
+    def to_json(self) -> dict[str, Any]:
+        """JSON-ready dict: ``env_config`` for an ANYmal run (as before generic runs existed), else ``env_kwargs``."""
+        env = self.target.to_json()
+        return {
+            "env_id": self.env_id,
+            "backend": self.backend,
+            "seed": self.seed,
+            "num_envs": self.num_envs,
+            "total_steps": self.total_steps,
+            "checkpoint_every": self.checkpoint_every,
+            "device": self.device,
+            "init_from": self.init_from,
+            **env,
+            "ppo": to_dict(self.ppo),
+        }
+
+    @classmethod
+    def from_json(cls, data: dict[str, Any]) -> TrainSpec:
+        """Inverse of :meth:`to_json`; also reads the ``config.json`` of runs older than ``env_kwargs``."""
+        backend = data["backend"]
+        ppo_class = RslPPOConfig if backend == "rsl" else Sb3PPOConfig
+        env_kwargs = data.get("env_kwargs")
+        if env_kwargs is None and data.get("env_config") is None:
+            raise ValueError("run config has neither env_config (ANYmal) nor env_kwargs (other environments)")
+        if env_kwargs is not None and not isinstance(env_kwargs, dict):
+            raise TypeError(f"env_kwargs: expected a mapping, got {env_kwargs!r}")
+        return cls(
+            env_id=data["env_id"],
+            backend=backend,
+            seed=int(data["seed"]),
+            num_envs=int(data["num_envs"]),
+            total_steps=int(data["total_steps"]),
+            checkpoint_every=int(data["checkpoint_every"]),
+            device=str(data.get("device", "cpu")),
+            env_config=None if env_kwargs is not None else from_dict(EnvConfig, data["env_config"], "env_config"),
+            env_kwargs=env_kwargs,
+            ppo=from_dict(ppo_class, data["ppo"], "ppo"),
+            init_from=data.get("init_from"),  # absent in runs recorded before warm starts existed
+        )
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """Outcome of :func:`train`."""
+
+    run_dir: Path
+    env_steps: int  # environment steps trained on so far (over every session of the run)
+    finished: bool  # reached total_steps; final_model and torchscript written
+    stopped: bool  # stopped by a signal or request; resumable from `checkpoint`
+    checkpoint: Path | None
+    final_model: Path | None
+    torchscript: Path | None
+    session_steps: int  # steps trained in this call
+    elapsed_s: float  # wall time of this call
+
+    @property
+    def steps_per_second(self) -> float:
+        return self.session_steps / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+
+def default_backend(env_id: str) -> str:
+    """``rsl`` (:data:`DEFAULT_BACKEND`) for the batched ANYmal ids, ``sb3`` for every other id.
+
+    Raises:
+        ValueError: the id is not registered.
+    """
+    return DEFAULT_BACKEND if is_batched_anymal(env_id) else GENERIC_BACKEND
+
+
+def make_spec(
+    env_id: str = DEFAULT_ENV,
+    backend: str = DEFAULT_BACKEND,
+    env_overrides: dict[str, Any] | None = None,
+    ppo_overrides: dict[str, Any] | None = None,
+    **run: Any,
+) -> TrainSpec:
+    """A :class:`TrainSpec` from an id, environment overrides, PPO field overrides and run settings.
+
+    ``env_overrides``: EnvConfig fields for the batched ANYmal ids, the environment's constructor keywords
+    (``margin_weight`` among them where it takes one) for every other id.
+
+    Raises:
+        ValueError: unknown id, or a generic id with the rsl backend.
+        TypeError: unknown option names or badly typed values.
+    """
+    if not is_batched_anymal(env_id) and backend != GENERIC_BACKEND:  # the backend is the first thing to fix
+        raise _generic_backend_error(env_id, backend)
+    target = env_target(env_id, env_overrides)
+    env = {"env_config": target.config} if target.is_anymal else {"env_kwargs": target.kwargs}
+    ppo = apply_overrides(default_ppo_config(backend), dict(ppo_overrides or {}))
+    return TrainSpec(env_id=env_id, backend=backend, ppo=ppo, **env, **run)
+
+
+def check_environment(spec: TrainSpec) -> None:
+    """Fail before a run directory is made when the spec's environment cannot be built as asked.
+
+    ANYmal: the learned margin's weights must load (:func:`~margin_rl.train.environments.check_margin_available`).
+    Generic: the id must not be a batched ANYmal one, and one environment must build with ``env_kwargs`` and
+    have spaces the generic path trains (:func:`~margin_rl.train.environments.check_gym_env`).
+
+    Raises:
+        ValueError: with a hint on what to change.
+    """
+    anymal_id = is_batched_anymal(spec.env_id)
+    if spec.is_anymal != anymal_id:
+        needed = "env_config" if anymal_id else "env_kwargs"
+        raise ValueError(f"{spec.env_id} needs a spec with {needed}; build the spec with make_spec")
+    spec.target.check()
+
+
+INIT_FROM_SUFFIX = {"rsl": ".pt", "sb3": ".zip"}
+"""File type of a warm start per backend: an rsl-rl training checkpoint or final model, an SB3 model."""
+
+
+def check_init_from(path: str, backend: str) -> None:
+    """A warm start must be an existing model file of the run's backend (its sizes are checked when it is loaded).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: a file of the other backend, or a TorchScript actor (it holds no critic to continue from).
+    """
+    file = Path(path)
+    if not file.is_file():
+        raise FileNotFoundError(f"--init-from {path}: no such file; give a finished run's final model or a checkpoint")
+    wanted = INIT_FROM_SUFFIX[backend]
+    if file.suffix != wanted or file.name == TORCHSCRIPT_FILE:
+        raise ValueError(
+            f"--init-from {path}: a {backend} run starts from a {backend} model ({wanted}: the run's "
+            f"{final_model_name(backend)} or a checkpoints/ckpt_<steps>{wanted}), not {file.name!r}"
+        )
+
+
+def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) -> Path:
+    """``config.json``: the spec, the exact backend settings, versions, time and command line.
+
+    A resumed run keeps its first command and start time and lists the later sessions' commands.
+    """
+    now = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    data = {
+        **spec.to_json(),
+        "backend_config": spec.backend_config(run_dir.name),
+        "versions": versions(),
+        "created": now,
+        "command": command if command is not None else [],
+        "sessions": [{"started": now, "command": command if command is not None else []}],
+    }
+    path = run_dir / CONFIG_FILE
+    previous = read_json(path) if path.is_file() else {}
+    if spec.init_from is not None:  # what the run started from: a resumed run keeps the first session's checksum
+        data["init_from_sha256"] = previous.get("init_from_sha256") or sha256_file(spec.init_from)
+    if previous:
+        data["created"] = previous.get("created", now)
+        data["command"] = previous.get("command", data["command"])
+        data["sessions"] = [*previous.get("sessions", []), *data["sessions"]]
+    return write_json(path, data)
+
+
+def load_spec(run_dir: str | Path) -> TrainSpec:
+    """The spec of an existing run (its ``config.json``)."""
+    return TrainSpec.from_json(read_json(Path(run_dir) / CONFIG_FILE))
+
+
+class _Progress:
+    """tqdm progress bar over environment steps (disabled with ``enabled=False``)."""
+
+    def __init__(self, total: int, initial: int, enabled: bool, label: str) -> None:
+        self.bar = tqdm(
+            total=total,
+            initial=initial,
+            unit="step",
+            unit_scale=True,
+            dynamic_ncols=True,
+            disable=not enabled,
+            desc=label,
+            smoothing=0.1,
+        )
+
+    def update(self, steps: int, mean_return: float | None) -> None:
+        if steps > self.bar.n:
+            self.bar.update(steps - self.bar.n)
+        if mean_return is not None:
+            self.bar.set_postfix_str(f"return {mean_return:.2f}", refresh=False)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def train(
+    spec: TrainSpec,
+    run_dir: str | Path,
+    *,
+    resume: bool = False,
+    progress: bool = True,
+    verbose: bool = False,
+    stop: StopRequest | None = None,
+    on_checkpoint: Any = None,
+    command: list[str] | None = None,
+    threads: int | None = 1,
+) -> TrainResult:
+    """Train (or, with ``resume``, continue from the latest checkpoint of ``run_dir``) one PPO run.
+
+    SIGINT/SIGTERM (or ``stop.request()``) stop at the next safe point with a checkpoint; ``on_checkpoint(path,
+    steps)`` is called after every checkpoint. ``threads``: torch intra-op threads while training (see
+    :func:`margin_rl.train.runs.torch_threads`; None keeps torch's setting). Raises FileExistsError when
+    ``run_dir`` already holds checkpoints and ``resume`` is False, ValueError when the environment cannot be built
+    (:func:`check_environment`).
+    """
+    run_dir = Path(run_dir)
+    check_environment(spec)
+    checkpoint = latest_checkpoint(run_dir)
+    if checkpoint is not None and not resume:
+        raise FileExistsError(f"{run_dir} already holds checkpoints; use --resume to continue it, or another --run-dir")
+    if not resume:
+        checkpoint = None
+    if checkpoint is None and spec.init_from is not None:  # a resumed run continues from its own checkpoint
+        check_init_from(spec.init_from, spec.backend)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_run_config(spec, run_dir, command)
+    start = checkpoint_steps(checkpoint) if checkpoint is not None else 0
+    stop = stop or StopRequest()
+    bar = _Progress(spec.total_iterations * spec.steps_per_iteration, start, progress, f"{spec.backend} {run_dir.name}")
+    latest: list[Path | None] = [checkpoint]
+
+    def checkpointed(path: Path, steps: int) -> None:
+        latest[0] = path
+        write_json(run_dir / PROGRESS_FILE, {"env_steps": steps, "checkpoint": path.name, "finished": False})
+        if on_checkpoint is not None:
+            on_checkpoint(path, steps)
+
+    hooks = RunHooks(lambda: stop.requested, bar.update, checkpointed, verbose)
+    t0 = time.perf_counter()
+    try:
+        with graceful_stop(stop, verbose=True), torch_threads(threads):
+            steps, stopped, torchscript = _run_backend(spec, run_dir, checkpoint, hooks)
+    finally:
+        bar.close()
+    elapsed = time.perf_counter() - t0
+    final = None if stopped else run_dir / final_model_name(spec.backend)
+    write_json(
+        run_dir / PROGRESS_FILE,
+        {
+            "env_steps": steps,
+            "checkpoint": latest[0].name if latest[0] is not None else None,
+            "finished": not stopped,
+            "stopped": stopped,
+            "stop_reason": stop.signal_name if stopped else None,
+            "final_model": final.name if final is not None else None,
+            "torchscript": torchscript.name if torchscript is not None else None,
+            "session_steps_per_s": (steps - start) / elapsed if elapsed > 0 else None,
+        },
+    )
+    return TrainResult(run_dir, steps, not stopped, stopped, latest[0], final, torchscript, steps - start, elapsed)
+
+
+def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks: RunHooks) -> tuple[int, bool, Any]:
+    """Seed, build the backend's vector environment over the spec's environment, and hand over to the backend."""
+    torch.manual_seed(spec.seed)
+    np.random.seed(spec.seed % 2**32)
+    final = run_dir / final_model_name(spec.backend)
+    if isinstance(spec.ppo, RslPPOConfig):
+        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed)
+        cfg = spec.backend_config(run_dir.name)
+        return train_rsl(
+            env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final, init_from=spec.init_from
+        )
+    venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed)
+    total = spec.total_iterations * spec.steps_per_iteration
+    return train_sb3(
+        venv,
+        spec.ppo,
+        run_dir,
+        spec.seed,
+        spec.device,
+        total,
+        spec.checkpoint_every,
+        checkpoint,
+        hooks,
+        final,
+        init_from=spec.init_from,
+    )
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# command line
+# ---------------------------------------------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="margin-rl-train",
+        description=__doc__,
+        epilog=f"Defaults: {cli.DEFAULTS_HELP}.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    cli.add_env_arguments(parser)
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default=None,
+        help=f"PPO library (default {DEFAULT_BACKEND} for ANYmal ids, {GENERIC_BACKEND}, the only one, for other ids)",
+    )
+    parser.add_argument(
+        "--margin-weight",
+        type=float,
+        help=f"weight of the margin reward term (0: baseline; default {cli.CLI_MARGIN_WEIGHT:g} for ANYmal ids); other "
+        "ids: their margin_weight keyword (default: the environment's)",
+    )
+    parser.add_argument("--seed", type=int, default=None, help=f"random seed (default {DEFAULT_SEED})")
+    parser.add_argument("--num-envs", type=int, default=None, help=f"parallel environments ({DEFAULT_NUM_ENVS})")
+    parser.add_argument("--total-steps", type=int, default=None, help=f"environment steps ({DEFAULT_TOTAL_STEPS})")
+    parser.add_argument(
+        "--checkpoint-every", type=int, default=None, help=f"steps between checkpoints ({DEFAULT_CHECKPOINT_EVERY})"
+    )
+    parser.add_argument("--ppo-option", action="append", metavar="KEY=VALUE", help="PPO config field (repeatable)")
+    parser.add_argument("--run-dir", type=Path, help="run directory (default: <runs-root>/<generated name>)")
+    parser.add_argument("--runs-root", type=Path, default=Path("runs"), help="parent of generated run directories")
+    parser.add_argument(
+        "--resume",
+        type=Path,
+        metavar="RUN_DIR",
+        help="continue this run from its latest checkpoint (its config.json; --total-steps may extend it)",
+    )
+    parser.add_argument(
+        "--init-from",
+        metavar="MODEL",
+        help="warm start: begin with the weights of this trained model (rsl: a run's final_model.pt or checkpoint; "
+        "sb3: .zip), e.g. a flat-ground policy to fine-tune on rough ground; steps and optimizer start fresh",
+    )
+    parser.add_argument("--device", default=None, help="learner device, e.g. cpu or cuda (default cpu)")
+    parser.add_argument(
+        "--torch-threads", type=int, default=1, help="torch intra-op threads (default 1: leaves the cores to MuJoCo)"
+    )
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--verbose", action="store_true", help="also print the backend's own logs")
+    return parser
+
+
+def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
+    """(spec, run directory, resume) from parsed arguments."""
+    if args.resume is not None:
+        if args.init_from is not None:
+            raise ValueError("--init-from starts a new run; --resume continues one from its own checkpoint: give one")
+        spec = load_spec(args.resume)
+        changes = {k: v for k, v in (("total_steps", args.total_steps), ("device", args.device)) if v is not None}
+        if changes:
+            spec = TrainSpec.from_json({**spec.to_json(), **changes})
+        if spec.init_from is not None and latest_checkpoint(args.resume) is None:  # stopped before its first one
+            check_init_from(spec.init_from, spec.backend)
+        return spec, args.resume, True
+    env_id = args.env or DEFAULT_ENV
+    backend = args.backend or default_backend(env_id)
+    run = {
+        "seed": DEFAULT_SEED if args.seed is None else args.seed,
+        "num_envs": args.num_envs or DEFAULT_NUM_ENVS,
+        "total_steps": args.total_steps or DEFAULT_TOTAL_STEPS,
+        "checkpoint_every": args.checkpoint_every or DEFAULT_CHECKPOINT_EVERY,
+        "device": args.device or "cpu",
+        "init_from": args.init_from,
+    }
+    overrides = cli.with_training_defaults(env_id, cli.env_overrides(args))
+    spec = make_spec(env_id, backend, overrides, parse_assignments(args.ppo_option, "--ppo-option"), **run)
+    if spec.init_from is not None:
+        check_init_from(spec.init_from, spec.backend)
+    run_dir = args.run_dir or args.runs_root / run_name(env_id, backend, spec.target.margin_weight, spec.seed)
+    return spec, run_dir, False
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns 0 when the run finished, 128 + signal number when it was stopped."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        spec, run_dir, resume = spec_from_args(args)
+        check_environment(spec)
+    except (ValueError, TypeError, FileNotFoundError) as exc:
+        parser.error(str(exc))
+    command = list(sys.argv if argv is None else ["margin-rl-train", *argv])
+    stop = StopRequest()
+    try:
+        result = train(
+            spec,
+            run_dir,
+            resume=resume,
+            progress=not args.no_progress,
+            verbose=args.verbose,
+            stop=stop,
+            command=command,
+            threads=args.torch_threads,
+        )
+    except FileExistsError as exc:
+        parser.error(str(exc))
+    rate = f"{result.steps_per_second:,.0f} steps/s"
+    if result.stopped:
+        print(f"stopped at {result.env_steps:,} steps ({rate}); checkpoint {result.checkpoint}")
+        print(f"resume with: python -m margin_rl.train train --resume {result.run_dir}")
+        signum = getattr(signal.Signals, stop.signal_name, None) if stop.signal_name else None
+        return 128 + int(signum) if signum is not None else 1
+    print(f"finished {result.env_steps:,} steps ({rate}) in {result.run_dir}")
+    print(f"final model {result.final_model}; TorchScript actor {result.torchscript}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

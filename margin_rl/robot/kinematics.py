@@ -72,15 +72,24 @@ class IKSolution:
 
 
 def _rot_x(angle: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotations about x. Written entry by entry: nested np.stack calls cost ~10x more per
+    call, which dominates one state's CoM fixed point."""
     c, s = np.cos(angle), np.sin(angle)
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    return np.stack([np.stack([one, zero, zero], -1), np.stack([zero, c, -s], -1), np.stack([zero, s, c], -1)], -2)
+    r = np.zeros((*np.shape(c), 3, 3))
+    r[..., 0, 0] = 1.0
+    r[..., 1, 1], r[..., 1, 2] = c, -s
+    r[..., 2, 1], r[..., 2, 2] = s, c
+    return r
 
 
 def _rot_y(angle: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotations about y (entry by entry, as :func:`_rot_x`)."""
     c, s = np.cos(angle), np.sin(angle)
-    one, zero = np.ones_like(c), np.zeros_like(c)
-    return np.stack([np.stack([c, zero, s], -1), np.stack([zero, one, zero], -1), np.stack([-s, zero, c], -1)], -2)
+    r = np.zeros((*np.shape(c), 3, 3))
+    r[..., 0, 0], r[..., 0, 2] = c, s
+    r[..., 1, 1] = 1.0
+    r[..., 2, 0], r[..., 2, 2] = -s, c
+    return r
 
 
 def leg_forward_kinematics(geometry: LegGeometry, joint_pos: np.ndarray) -> np.ndarray:
@@ -102,15 +111,16 @@ def leg_frames(geometry: LegGeometry, joint_pos: np.ndarray) -> list[tuple[np.nd
 
     The leg chain of :class:`LegGeometry`: R_hip = Rx(q_HAA), R_thigh = R_hip Ry(q_HFE),
     R_shank = R_thigh Ry(q_KFE); o_hip = haa_origin, o_thigh = o_hip + R_hip hfe_offset,
-    o_shank = o_thigh + R_thigh kfe_offset.
+    o_shank = o_thigh + R_thigh kfe_offset. ``geometry`` may hold several legs stacked ((L, 3) vectors, with
+    ``joint_pos`` (..., L, 3)): the frames of all of them at once.
     """
     q = np.asarray(joint_pos, dtype=float)
     r_hip = _rot_x(q[..., 0])
     r_thigh = r_hip @ _rot_y(q[..., 1])
     r_shank = r_thigh @ _rot_y(q[..., 2])
     o_hip = np.broadcast_to(geometry.haa_origin, (*q.shape[:-1], 3))
-    o_thigh = o_hip + np.einsum("...ij,j->...i", r_hip, geometry.hfe_offset)
-    o_shank = o_thigh + np.einsum("...ij,j->...i", r_thigh, geometry.kfe_offset)
+    o_thigh = o_hip + np.einsum("...ij,...j->...i", r_hip, geometry.hfe_offset)
+    o_shank = o_thigh + np.einsum("...ij,...j->...i", r_thigh, geometry.kfe_offset)
     return [(o_hip, r_hip), (o_thigh, r_thigh), (o_shank, r_shank)]
 
 
@@ -307,15 +317,42 @@ class RobotKinematics:
             (..., 3) CoM relative to the base origin [m].
         """
         q = self._check_joint_pos(joint_pos)
+        base_moment, leg_bodies = self._com_bodies
+        total = base_moment + np.zeros((*q.shape[:-1], 3))
+        # The frames of the four legs at once (numpy's per-call overhead, not arithmetic, is the cost).
+        frames = leg_frames(self._stacked_legs, q.reshape(*q.shape[:-1], len(self.legs), 3))
+        for i, bodies in enumerate(leg_bodies):
+            for (mass, ipos), (o, R) in zip(bodies, frames, strict=True):
+                total = total + mass * (o[..., i, :] + R[..., i, :, :] @ ipos)
+        return total / self.total_mass
+
+    @functools.cached_property
+    def _stacked_legs(self) -> LegGeometry:
+        """The legs' geometry stacked along a leading leg axis ((4, 3) vectors), for :func:`leg_frames`."""
+        legs = self.legs
+        return LegGeometry(
+            leg="all",
+            **{
+                name: np.stack([getattr(g, name) for g in legs])
+                for name in ("haa_origin", "hfe_offset", "kfe_offset", "foot_offset", "lower", "upper")
+            },
+            knee_sign=float("nan"),  # unused by the frames
+        )
+
+    @functools.cached_property
+    def _com_bodies(self) -> tuple[np.ndarray, tuple[tuple[tuple[float, np.ndarray], ...], ...]]:
+        """The MJCF's mass moment of the base (m c, (3,)) and, per leg, (mass, inertial position) of its HIP,
+        THIGH and SHANK bodies, read by name once (named access costs more than the arithmetic)."""
         model = self.mj_model
         base = model.body("base").id
-        total = model.body_mass[base] * model.body_ipos[base] + np.zeros((*q.shape[:-1], 3))
-        for i, g in enumerate(self.legs):
-            frames = leg_frames(g, q[..., 3 * i : 3 * i + 3])
-            for suffix, (o, R) in zip(("HIP", "THIGH", "SHANK"), frames, strict=True):
-                b = model.body(f"{g.leg}_{suffix}").id
-                total = total + model.body_mass[b] * (o + R @ model.body_ipos[b])
-        return total / self.total_mass
+        legs = tuple(
+            tuple(
+                (model.body_mass[b], model.body_ipos[b].copy())
+                for b in (model.body(f"{g.leg}_{suffix}").id for suffix in ("HIP", "THIGH", "SHANK"))
+            )
+            for g in self.legs
+        )
+        return model.body_mass[base] * model.body_ipos[base], legs
 
     def inverse_kinematics(self, foot_pos: np.ndarray, clip: bool = False) -> IKSolution:
         """Batched analytic IK of all four legs, with an explicit per-leg reachability status.

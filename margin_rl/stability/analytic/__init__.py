@@ -2,11 +2,12 @@
 
 ::
 
-    lambda_state   LAMBDA_FIELDS, StabilityState, from_lambda: the one declaration of lambda's layout
-    sampling       the Table I sampler (sample_states) and the locomotion distribution (DISTRIBUTIONS)
-    contact_batch  the contact problems of many states at once (batched IK, Jacobians, wrenches)
-    margin         analytic_margin(robot, lam) and analytic_margin_batch (the labelling path)
-    extended       the extended margin m_x: m_a continued to states without a Feasible Region
+    lambda_state     LAMBDA_FIELDS, StabilityState, from_lambda: the one declaration of lambda's layout
+    sampling         the Table I sampler (sample_states) and the locomotion distribution (DISTRIBUTIONS)
+    contact_problem  ContactProblem: what both criteria need about N states (IK, Jacobians, contacts,
+                     ICP, wrench), batch-first: one state is a batch of one
+    margin           analytic_margin(robot, lam) and analytic_margin_batch (the labelling path)
+    extended         the extended margin m_x: m_a continued to states without a Feasible Region
 """
 
 from margin_rl.stability.analytic.margin import (

@@ -156,7 +156,7 @@ def extended_margin_batch(
     alone is used, so those calls use a loose focus bracket (the region only has to be found non-empty).
 
     Args:
-        robot: from :func:`margin_rl.load_robot` (workers load their own copy by ``robot.name``).
+        robot: from :func:`margin_rl.load_robot` (worker processes load their own copy by ``robot.name``).
         lams: (N, 47) lambda.
         settings: analytic settings of m_a and of the relaxed margin.
         workers: processes for the analytic calls (None: all cores).
@@ -176,7 +176,7 @@ def extended_margin_batch(
     probe = replace(s, focus_tol=max(s.focus_tol or 0.0, 0.05), outside="euclidean")
 
     def label(x: np.ndarray, how: AnalyticSettings):
-        return analytic_margin_batch(robot.name, x, how, workers=workers, chunk_size=chunk_size)
+        return analytic_margin_batch(robot, x, how, workers=workers, chunk_size=chunk_size)
 
     ok, infeasible = STATUSES.index("ok"), STATUSES.index("infeasible")
     base = label(lams, s)

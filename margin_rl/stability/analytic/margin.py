@@ -47,19 +47,14 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 
 from margin_rl.robot import Robot, load_robot
-from margin_rl.stability.analytic.contact_batch import ContactBatch, contact_batch
+from margin_rl.stability.analytic.contact_problem import ContactProblem, contact_problem
 from margin_rl.stability.analytic.lambda_state import (
     LAMBDA_DIM,
-    base_rotation_from_gravity_axis,
     check_lambda,
-    from_lambda,
 )
 from margin_rl.stability.analytic.sampling import standing_state
 from margin_rl.stability.geometry.contact import (
     DEFAULT_CONTACT_TORQUE_LIMIT,
-    CentroidalLoad,
-    ContactSet,
-    LegLimits,
     parse_friction,
     positive_scalar,
 )
@@ -172,124 +167,6 @@ def _failed(status: str, t0: float, q: np.ndarray, message: str, **timings: floa
     )
 
 
-@dataclass(frozen=True)
-class ContactProblem:
-    """Everything a stability criterion needs about one state, in the horizontal frame H.
-
-    Built by :func:`contact_problem` (steps 1-4 of the module docstring); shared by the feasible
-    region (:func:`analytic_margin`) and the feasible wrench polytope criterion.
-    """
-
-    contact_points: np.ndarray  # (4, 3) foot-sphere contact points relative to the CoM [m]
-    normals: np.ndarray  # (4, 3) unit terrain normals
-    stance: np.ndarray  # (4,) bool
-    mu: float
-    mass: float  # [kg]
-    gravity: float  # [m/s^2]
-    jacobians: np.ndarray  # (4, 3, 3) foot Jacobians w.r.t. each leg's joints, in H
-    torque_limits: np.ndarray  # (4, 3) symmetric limits [N m]
-    leg_bias: np.ndarray  # (4, 3) delta_i [N m]
-    com_acc: np.ndarray  # (3,) [m/s^2]
-    ang_momentum_rate: np.ndarray  # (3,) L_dot about the CoM [N m]
-    ext_force: np.ndarray  # (3,) [N]
-    ext_torque: np.ndarray  # (3,) [N m]
-    com_vel: np.ndarray  # (3,) [m/s]
-    com_height: float  # CoM height above the stance contact points [m]
-    capture_point: np.ndarray  # (2,) ICP relative to the CoM [m], eq. (5)
-    joint_pos: np.ndarray  # (12,) [rad]
-    base_rotation: np.ndarray  # (3, 3) R_HB
-
-    def contact_set(
-        self, friction: str | tuple[str, int] = "cone", contact_torque_limit: float = DEFAULT_CONTACT_TORQUE_LIMIT
-    ) -> ContactSet:
-        """The contacts (points, normals, stance, mu) with a friction model and w_M of eq. (3)."""
-        return ContactSet(self.contact_points, self.normals, self.stance, self.mu, friction, contact_torque_limit)
-
-    def leg_limits(self) -> LegLimits:
-        """The legs' Jacobians, symmetric torque limits and bias torques."""
-        return LegLimits(self.jacobians, self.torque_limits, self.leg_bias)
-
-    def load(self) -> CentroidalLoad:
-        """Mass, CoM acceleration, angular-momentum rate, external wrench and gravity."""
-        return CentroidalLoad(
-            self.mass, self.com_acc, self.ang_momentum_rate, self.ext_force, self.ext_torque, self.gravity
-        )
-
-    def gravito_inertial_wrench(self) -> np.ndarray:
-        """(6,) wrench [N, N m] the contacts must produce, about the CoM in H (seed 004 eq. 14-15)."""
-        return self.load().wrench()
-
-
-def contact_problem(
-    robot: Robot, lam: np.ndarray, settings: AnalyticSettings | None = None
-) -> ContactProblem | tuple[str, str, np.ndarray]:
-    """Steps 1-4 of the pipeline: lambda -> IK, Jacobians, bias torques, contact points, ICP.
-
-    Returns:
-        A :class:`ContactProblem`, or ``(status, message, joint_pos)`` when the state has no answer
-        ("no_contact", "unreachable", "infeasible" for a CoM not above its stance feet).
-
-    Raises:
-        ValueError: lambda of the wrong shape, with NaN/inf (the message names the field), a
-            non-unit gravity axis, contact flags other than 0/1, or mu <= 0.
-    """
-    s = AnalyticSettings() if settings is None else settings
-    lam = check_lambda(lam)
-    if lam.shape != (LAMBDA_DIM,):
-        raise ValueError(f"one lambda of shape ({LAMBDA_DIM},) is expected, got {lam.shape}")
-    st = from_lambda(lam)
-    if not ((st.contacts == 0.0) | (st.contacts == 1.0)).all():
-        raise ValueError(f"lambda contacts must be 0 or 1, got {st.contacts.tolist()}")
-    if not st.mu > 0:
-        raise ValueError(f"lambda mu must be positive, got {float(st.mu)}")
-    R = base_rotation_from_gravity_axis(st.gravity_axis)
-    stance = st.contacts.astype(bool)
-    if not stance.any():
-        return "no_contact", "no foot in contact", np.full(12, np.nan)
-
-    # 2. IK with the CoM-offset fixed point.
-    ik, _ = robot.inverse_kinematics_com_relative(st.feet @ R, s.com_iterations, s.com_tol)  # rows: R^T p_H
-    if not ik.reachable.all():
-        legs = [leg for leg, ok in zip(robot.leg_names, ik.reachable, strict=True) if not ok]
-        return "unreachable", f"unreachable feet: {', '.join(legs)}", ik.joint_pos
-    q = ik.joint_pos
-
-    # 3. Jacobians, bias torques and centroidal angular-momentum rate in H.
-    jacobians, dynamics = robot.jacobians_and_dynamics(
-        q, base_rotation=R, com_acc=st.com_acc, base_ang_acc=st.base_ang_acc
-    )
-
-    # 4. Contact points of the foot spheres, CoM height above them, ICP.
-    normals = st.normals / np.linalg.norm(st.normals, axis=-1, keepdims=True)
-    contact_points = st.feet - robot.foot_radius * normals
-    heights = contact_points[stance, 2]
-    com_height = float(-(heights.sum() / heights.size))  # np.mean's operations, less overhead
-    if not com_height > 0:
-        return "infeasible", f"CoM is not above the stance feet (height {com_height:.3f} m)", q
-    return ContactProblem(
-        contact_points=contact_points,
-        normals=normals,
-        stance=stance,
-        mu=float(st.mu),
-        mass=robot.total_mass,
-        gravity=robot.gravity,
-        jacobians=jacobians,
-        torque_limits=robot.torque_limits.reshape(len(robot.legs), 3),
-        leg_bias=dynamics.bias_torques,
-        com_acc=st.com_acc,
-        ang_momentum_rate=dynamics.ang_momentum_rate,
-        ext_force=st.ext_force,
-        ext_torque=st.ext_torque,
-        com_vel=st.com_vel,
-        com_height=com_height,
-        # Eq. (5) with c_xy = 0 (H is centred on the CoM): xi = c_dot_xy / omega = c_dot_xy sqrt(z / g); the
-        # inputs are already checked (finite lambda, z > 0), which capture_point would repeat.
-        capture_point=st.com_vel[:2] * math.sqrt(com_height / robot.gravity),
-        joint_pos=q,
-        base_rotation=R,
-    )
-
-
 def analytic_margin(robot: Robot, lam: np.ndarray, settings: AnalyticSettings | None = None) -> AnalyticMarginResult:
     """Analytic stability margin m_a of one state (see the module docstring for the pipeline).
 
@@ -307,11 +184,13 @@ def analytic_margin(robot: Robot, lam: np.ndarray, settings: AnalyticSettings | 
     """
     t0 = time.perf_counter()
     s = AnalyticSettings() if settings is None else settings
-    problem = contact_problem(robot, lam, s)
+    lam = check_lambda(lam)
+    if lam.shape != (LAMBDA_DIM,):
+        raise ValueError(f"one lambda of shape ({LAMBDA_DIM},) is expected, got {lam.shape}")
+    problem = contact_problem(robot, lam[None], s.com_iterations, s.com_tol)[0]  # one state: a batch of one
     t1 = time.perf_counter()
-    if not isinstance(problem, ContactProblem):
-        status, message, q = problem
-        return _failed(status, t0, q, message, kinematics=t1 - t0)
+    if problem.status != "ok":
+        return _failed(problem.status, t0, problem.joint_pos, problem.message, kinematics=t1 - t0)
 
     # 4. Feasible region of the CoM over the stance contact points, focused on the ICP (step 5).
     icp = problem.capture_point
@@ -376,9 +255,9 @@ def worker_robot(name: str) -> Robot:
     return _WORKER_ROBOT[name]
 
 
-def _evaluate_chunk(args: tuple[str, np.ndarray, AnalyticSettings]) -> tuple[np.ndarray, ...]:
-    name, lams, settings = args
-    robot = worker_robot(name)
+def _evaluate_chunk(args: tuple[Robot | str, np.ndarray, AnalyticSettings]) -> tuple[np.ndarray, ...]:
+    robot, lams, settings = args
+    robot = worker_robot(robot) if isinstance(robot, str) else robot
     # The batched path needs the focused projection (the labels' default): its margin is the bracket's
     # inner end, and it builds no FeasibleRegion. Other settings are labelled state by state.
     if settings.labelling == "batched" and settings.focus_tol is not None:
@@ -394,7 +273,7 @@ def _evaluate_chunk(args: tuple[str, np.ndarray, AnalyticSettings]) -> tuple[np.
 
 
 def _stance_programs(
-    batch: ContactBatch, states: np.ndarray, structure: ProgramStructure, w_max: float, extent: float
+    batch: ContactProblem, states: np.ndarray, structure: ProgramStructure, w_max: float, extent: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """The region programs' data (:func:`program_values`) of ``states`` of ``batch``, each with
     ``structure.n_stance`` stance feet (taken in leg order)."""
@@ -421,8 +300,8 @@ def _label_batched(robot: Robot, lams: np.ndarray, s: AnalyticSettings) -> tuple
     """``(margin, status, n_lps, seconds)`` of many states by the batched path (``labelling="batched"``).
 
     The same steps as :func:`analytic_margin` with ``s.focus_tol`` set: the contact problems of the
-    whole batch at once (:func:`~margin_rl.stability.analytic.contact_batch.contact_batch`), then, per number of
-    stance feet, the programs' data of all those states at once and one re-used solver
+    whole batch at once (:func:`~margin_rl.stability.analytic.contact_problem.contact_problem`), then, per
+    number of stance feet, the programs' data of all those states at once and one re-used solver
     (:mod:`~margin_rl.stability.geometry.region_batch`), the focused projection of each state, and its margin
     from the region's vertices as in step 5 (the bare vertices and half-spaces: no FeasibleRegion is
     returned). A region reaching the clipping box is a solver error, as an "unbounded" one is. ``seconds``
@@ -431,7 +310,7 @@ def _label_batched(robot: Robot, lams: np.ndarray, s: AnalyticSettings) -> tuple
     assert s.focus_tol is not None  # callers dispatch unfocused settings to the per-state path
     t_start = time.perf_counter()
     n_states = len(lams)
-    batch = contact_batch(robot, lams, s.com_iterations, s.com_tol)
+    batch = contact_problem(robot, lams, s.com_iterations, s.com_tol)
     margin, status = np.full(n_states, np.nan), np.zeros(n_states, dtype=np.int8)
     n_lps, seconds = np.zeros(n_states, dtype=np.int16), np.zeros(n_states)
     status[batch.below_feet] = STATUSES.index("infeasible")
@@ -452,7 +331,7 @@ def _label_batched(robot: Robot, lams: np.ndarray, s: AnalyticSettings) -> tuple
     seconds += (time.perf_counter() - t_start) / max(n_states, 1)
 
     # The solvers' set-up (equilibration) comes from the standing state, the same for every batch.
-    reference = contact_batch(robot, standing_state(robot)[None], s.com_iterations, s.com_tol)
+    reference = contact_problem(robot, standing_state(robot)[None], s.com_iterations, s.com_tol)
     for n in np.unique(n_stance[solvable]).tolist():
         t_group = time.perf_counter()
         states = np.flatnonzero(solvable & (n_stance == n))
@@ -489,13 +368,13 @@ def _label_batched(robot: Robot, lams: np.ndarray, s: AnalyticSettings) -> tuple
     return margin, status, n_lps, seconds
 
 
-def _chunks(name: str, lams: np.ndarray, settings: AnalyticSettings, size: int) -> Iterator[tuple]:
+def _chunks(robot: Robot | str, lams: np.ndarray, settings: AnalyticSettings, size: int) -> Iterator[tuple]:
     for start in range(0, len(lams), size):
-        yield name, lams[start : start + size], settings
+        yield robot, lams[start : start + size], settings
 
 
 def analytic_margin_batch(
-    robot_name: str,
+    robot: Robot | str,
     lams: np.ndarray,
     settings: AnalyticSettings | None = None,
     workers: int | None = None,
@@ -504,7 +383,8 @@ def analytic_margin_batch(
     """Analytic margins of many states, in parallel over local processes.
 
     Args:
-        robot_name: a name accepted by :func:`margin_rl.load_robot` (each worker loads its own copy).
+        robot: a :class:`Robot`, or a name accepted by :func:`margin_rl.load_robot`; worker processes load
+            their own copy by name, one process (``workers=1``) uses a Robot as given.
         lams: (N, 47) lambda.
         settings: analytic settings.
         workers: number of processes; ``os.cpu_count()`` if omitted, 1 runs in this process.
@@ -517,10 +397,11 @@ def analytic_margin_batch(
     workers = (os.cpu_count() or 1) if workers is None else int(workers)
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    tasks = list(_chunks(robot_name, lams, s, chunk_size))
-    if workers == 1 or len(tasks) <= 1:
-        parts = [_evaluate_chunk(t) for t in tasks]
+    if workers == 1 or len(lams) <= chunk_size:
+        parts = [_evaluate_chunk(t) for t in _chunks(robot, lams, s, chunk_size)]
     else:
+        name = robot if isinstance(robot, str) else robot.name
+        tasks = list(_chunks(name, lams, s, chunk_size))
         # fork is cheap and safe here: workers only run numpy, Pinocchio and Clarabel.
         with multiprocessing.get_context("fork").Pool(workers) as pool:
             parts = pool.map(_evaluate_chunk, tasks)

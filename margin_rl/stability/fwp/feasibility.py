@@ -161,19 +161,20 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from margin_rl.robot import Robot
-from margin_rl.stability.analytic.margin import ContactProblem, contact_problem
+from margin_rl.stability.analytic.contact_problem import ContactProblem, contact_problem
+from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, check_lambda
 from margin_rl.stability.fwp.polytope import (
     DEFAULT_N_FACES,
     FeasibleWrenchPolytope,
-    _check_n_faces,
-    _span_basis,
     bounded_friction_cone,
+    check_n_faces,
     contact_wrench_vertices,
     feasible_wrench_polytope,
     force_polytope,
     friction_cone_edges,
+    span_basis,
 )
-from margin_rl.stability.fwp.programs import _gauge_lp, _polar_support_lp, _residual_lp
+from margin_rl.stability.fwp.programs import gauge_lp, polar_support_lp, residual_lp
 from margin_rl.stability.geometry.contact import (
     as_array,
     as_rows,
@@ -354,16 +355,16 @@ def _factor(
     t0 = time.perf_counter()
     centred = np.concatenate(blocks)
     scale = float(np.max(np.abs(centred), initial=0.0))
-    basis = _span_basis(centred, scale)
+    basis = span_basis(centred, scale)
     n_var = centred.shape[0] + 1
     off_span = rhs - basis @ (basis.T @ rhs)
     if np.linalg.norm(off_span) > _SPAN_TOL * max(scale, float(np.linalg.norm(rhs))):
         msg = f"wrench is off the span of the {basis.shape[1]}-dimensional FWP: no contact forces produce it"
         return FeasibilityResult(-math.inf, "ok", time.perf_counter() - t0, n_var, n_equalities_paper, msg)
     if dual and len(blocks) == 1:
-        s, msg = _polar_support_lp(blocks[0], rhs, basis)
+        s, msg = polar_support_lp(blocks[0], rhs, basis)
     else:
-        t, msg, _ = _gauge_lp(blocks, rhs, basis)
+        t, msg, _ = gauge_lp(blocks, rhs, basis)
         s = 1.0 - t
     status = "solver_error" if math.isnan(s) else "ok"
     return FeasibilityResult(s, status, time.perf_counter() - t0, n_var, n_equalities_paper, msg)
@@ -445,9 +446,9 @@ def wrench_violations(fwp: FeasibleWrenchPolytope, wrench: ArrayLike) -> tuple[s
     if not fwp.force_vertices:
         return () if not np.any(w) else ("contact", "actuation")
     out = []
-    if not _residual_lp(wrenches(fwp.cone_edges), wh, convex=False) <= tol:
+    if not residual_lp(wrenches(fwp.cone_edges), wh, convex=False) <= tol:
         out.append("contact")
-    if not _residual_lp(wrenches(fwp.actuation_vertices), wh, convex=True) <= tol:
+    if not residual_lp(wrenches(fwp.actuation_vertices), wh, convex=True) <= tol:
         out.append("actuation")
     if out:
         return tuple(out)
@@ -535,9 +536,10 @@ def halfspace_margin(halfspaces: ArrayLike, wrench: ArrayLike, length_scale: flo
 def contact_problem_polytope(
     problem: ContactProblem, n_faces: int = DEFAULT_N_FACES, prune: bool = True
 ) -> FeasibleWrenchPolytope:
-    """:func:`feasible_wrench_polytope` of a state's contacts.
+    """:func:`feasible_wrench_polytope` of one state's contacts.
 
-    ``problem`` comes from :func:`~margin_rl.stability.analytic.margin.contact_problem`.
+    ``problem``: one state's problem, ``contact_problem(robot, lams)[i]``
+    (:func:`~margin_rl.stability.analytic.contact_problem.contact_problem`).
     """
     return feasible_wrench_polytope(
         problem.contact_points,
@@ -557,8 +559,8 @@ def fwp_feasibility(
 ) -> FWPFeasibility:
     r"""FWP feasibility factor of one state lambda (the same input as the analytic margin).
 
-    Pipeline: :func:`~margin_rl.stability.analytic.margin.contact_problem` (IK, Jacobians and bias torques in
-    H, contact points, statuses) :math:`\to` :func:`feasible_wrench_polytope` :math:`\to`
+    Pipeline: :func:`~margin_rl.stability.analytic.contact_problem.contact_problem` (IK, Jacobians and bias
+    torques in H, contact points, statuses) :math:`\to` :func:`feasible_wrench_polytope` :math:`\to`
     :func:`gravito_inertial_wrench` (about the CoM) :math:`\to` ``s`` (eq. 24) :math:`\to` for
     ``s < 0``, :func:`wrench_violations`.
 
@@ -588,20 +590,23 @@ def fwp_feasibility(
     Raises
     ------
     ValueError
-        Malformed lambda (see :func:`~margin_rl.stability.analytic.margin.contact_problem`) or ``n_faces``.
+        Malformed lambda (see :func:`~margin_rl.stability.analytic.contact_problem.contact_problem`) or
+        ``n_faces``.
     """
     t0 = time.perf_counter()
-    _check_n_faces(n_faces)
-    problem = contact_problem(robot, np.asarray(lam, dtype=np.float64))
+    check_n_faces(n_faces)
+    lam = check_lambda(lam)
+    if lam.shape != (LAMBDA_DIM,):
+        raise ValueError(f"one lambda of shape ({LAMBDA_DIM},) is expected, got {lam.shape}")
+    problem = contact_problem(robot, lam[None])[0]  # one state: a batch of one
     t1 = time.perf_counter()
     nan_wrench = frozen_array(np.full(6, np.nan))
-    if not isinstance(problem, ContactProblem):
-        status, message, _ = problem
+    if problem.status != "ok":
         timings = {"kinematics": t1 - t0, "total": time.perf_counter() - t0}
-        return FWPFeasibility(math.nan, status, nan_wrench, (), None, (), timings, message)
+        return FWPFeasibility(math.nan, problem.status, nan_wrench, (), None, (), timings, problem.message)
 
     fwp = contact_problem_polytope(problem, n_faces=n_faces, prune=prune)
-    wrench = frozen_array(problem.gravito_inertial_wrench())
+    wrench = frozen_array(problem.wrench)
     t2 = time.perf_counter()
     if prune and fwp.n_vertices > 0:
         res = feasibility_factor(fwp.vertices, wrench, center=fwp.center, length_scale=fwp.length_scale)

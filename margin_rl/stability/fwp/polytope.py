@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from margin_rl.stability.fwp.programs import _depth_lp
+from margin_rl.stability.fwp.programs import depth_lp
 from margin_rl.stability.geometry.contact import (
     as_array,
     as_rows,
@@ -150,7 +150,7 @@ _SIMPLEX_CHUNK = 4096
 # --------------------------------------------------------------------------------------------
 
 
-def _check_n_faces(n_faces: Any) -> int:
+def check_n_faces(n_faces: Any) -> int:
     if isinstance(n_faces, bool) or not isinstance(n_faces, (int, np.integer)) or n_faces < 3:
         raise ValueError(f"n_faces must be an integer >= 3, got {n_faces!r}")
     return int(n_faces)
@@ -194,7 +194,7 @@ def friction_cone_edges(normal: ArrayLike, mu: float, n_faces: int = DEFAULT_N_F
     """
     n = _unit_normal(normal)
     mu_v = positive_scalar("mu", mu)
-    k = _check_n_faces(n_faces)
+    k = check_n_faces(n_faces)
     t1, t2 = tangent_bases(n[None, :])
     th = (2.0 * np.arange(k) + 1.0) * np.pi / k
     e = n + mu_v * (np.cos(th)[:, None] * t1 + np.sin(th)[:, None] * t2)
@@ -368,7 +368,7 @@ def bounded_friction_cone(
     """
     n = _unit_normal(normal)
     mu_v = positive_scalar("mu", mu)
-    k = _check_n_faces(n_faces)
+    k = check_n_faces(n_faces)
     jac, lo, hi, bias = _leg_arrays(jacobian, torque_lo, torque_hi, leg_bias)
     return _bounded_cone(n, mu_v, jac, lo, hi, bias, k)[0]
 
@@ -475,7 +475,7 @@ def _minkowski_vertices(contacts: list[_Contact]) -> tuple[IntArray, int]:
             gens = np.concatenate([contacts[i].generators[chunk[:, i]] for i in range(j + 1)], axis=1)
             depth = _phase1_depth(gens, rng)
             for r in np.flatnonzero(np.isnan(depth)):  # rare: ran out of pivots
-                depth[r] = _depth_lp(gens[r])
+                depth[r] = depth_lp(gens[r])
             # A candidate still undecided (NaN) is kept: an extra point never changes the hull.
             keep[start : start + chunk.shape[0]] = ~(depth <= _POINTED_TOL)
         tuples = cand[keep]
@@ -487,7 +487,7 @@ def _minkowski_vertices(contacts: list[_Contact]) -> tuple[IntArray, int]:
 # --------------------------------------------------------------------------------------------
 
 
-def _span_basis(points: FloatArray, scale: float) -> FloatArray:
+def span_basis(points: FloatArray, scale: float) -> FloatArray:
     """Orthonormal basis (6, r) of the linear span of the rows of ``points`` (rank to 1e-9 * scale).
 
     QR first: the SVD of the small triangular factor has the same singular values and right vectors,
@@ -550,7 +550,7 @@ def feasible_wrench_polytope(
         points, normals, stance, jacobians, torque_limits, leg_bias, points_name="points", min_joints=3
     )
     mu_v = positive_scalar("mu", mu)
-    k_faces = _check_n_faces(n_faces)
+    k_faces = check_n_faces(n_faces)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
         raise ValueError("torque_limits must be finite for stance legs (the FWP would be unbounded)")
     for i in range(idx.size):
@@ -579,7 +579,7 @@ def feasible_wrench_polytope(
     else:
         center = homog * sum(c.wrenches.mean(axis=0) for c in contacts)
         centred = np.concatenate([c.wrenches - c.wrenches.mean(axis=0) for c in contacts])
-        dim = _span_basis(centred, float(np.max(np.abs(centred), initial=0.0))).shape[1]
+        dim = span_basis(centred, float(np.max(np.abs(centred), initial=0.0))).shape[1]
 
     tuples = np.zeros((0, idx.size), dtype=np.intp)
     n_tested = 0

@@ -5,10 +5,10 @@ the Minkowski pruning) and :mod:`~margin_rl.stability.fwp.feasibility` (the feas
 tests). Variables are wrenches :math:`w = (f, \tau/\ell)` in the homogenised units of their caller
 (moments divided by a length :math:`\ell` [m], frame H of :mod:`~margin_rl.stability.geometry.region`):
 
-* :func:`_depth_lp`: depth of the normal cone of a candidate Minkowski sum (eq. 13), one candidate;
-* :func:`_gauge_lp` and :func:`_polar_support_lp`: the gauge form of eq. (24) on blocks of centred
+* :func:`depth_lp`: depth of the normal cone of a candidate Minkowski sum (eq. 13), one candidate;
+* :func:`gauge_lp` and :func:`polar_support_lp`: the gauge form of eq. (24) on blocks of centred
   vertices, and its LP dual, the support function of the polar (:math:`s = 1 - \gamma`);
-* :func:`_residual_lp`: the :math:`\ell_1` residual of a wrench to a cone or to a Minkowski sum of
+* :func:`residual_lp`: the :math:`\ell_1` residual of a wrench to a cone or to a Minkowski sum of
   convex hulls (CWC and AWP membership, eq. 4-8);
 * :func:`_solve_lp`: the shared fast-then-robust Clarabel call.
 """
@@ -34,7 +34,7 @@ _SETTINGS_ROBUST = solver_settings(robust=True, tol=1e-9, max_iter=200)
 # Interior-point infeasibility certificates are reliable: not retried (INFEASIBLE).
 
 
-def _depth_lp(gens: FloatArray) -> float:
+def depth_lp(gens: FloatArray) -> float:
     """Fallback for one candidate: ``max t`` s.t. ``g^T c + t <= 0``, ``|c|_inf <= 1``, ``t <= 1`` (Clarabel).
 
     Same value as the batched phase-1 simplex of :mod:`~margin_rl.stability.fwp.polytope` by LP
@@ -74,7 +74,7 @@ def _solve_lp(q: FloatArray, a: sp.csc_matrix, b: FloatArray, n_eq: int) -> tupl
     return status, np.full(n, np.nan)
 
 
-def _gauge_lp(blocks: list[FloatArray], rhs: FloatArray, basis: FloatArray) -> tuple[float, str, float]:
+def gauge_lp(blocks: list[FloatArray], rhs: FloatArray, basis: FloatArray) -> tuple[float, str, float]:
     r"""``min t`` s.t. ``sum_i sum_k mu_ik g_ik = rhs`` (in span(basis)), ``sum_k mu_ik = t`` for every
     block, ``mu >= 0``. One block of n_v columns is eq. (24) with t = 1 - s. Returns (t, status, time)."""
     t0 = time.perf_counter()
@@ -104,7 +104,7 @@ def _gauge_lp(blocks: list[FloatArray], rhs: FloatArray, basis: FloatArray) -> t
     return float(x[n_mu]), "", time.perf_counter() - t0
 
 
-def _polar_support_lp(vertices: FloatArray, rhs: FloatArray, basis: FloatArray) -> tuple[float, str]:
+def polar_support_lp(vertices: FloatArray, rhs: FloatArray, basis: FloatArray) -> tuple[float, str]:
     """Dual of eq. (24): ``max rhs^T u`` s.t. ``v_j^T u <= 1`` in span(basis); returns (1 - max, message).
 
     An unbounded program (Clarabel: dual infeasible) means the primal is infeasible: ``s = -inf``.
@@ -126,7 +126,7 @@ def _polar_support_lp(vertices: FloatArray, rhs: FloatArray, basis: FloatArray) 
     return math.nan, f"solver status {status}"
 
 
-def _residual_lp(blocks: list[FloatArray], w: FloatArray, convex: bool) -> float:
+def residual_lp(blocks: list[FloatArray], w: FloatArray, convex: bool) -> float:
     """Smallest ``||w - sum alpha g||_1`` with alpha >= 0 (and sum_k alpha_ik = 1 per block if convex).
 
     NaN if the solver fails, which :func:`~margin_rl.stability.fwp.feasibility.wrench_violations` reads as "not a

@@ -319,14 +319,14 @@ def _dense_to_csc(a: FloatArray) -> sp.csc_matrix:
     return sp.csc_matrix((flat[nz], (nz % m).astype(np.int32), indptr), shape=(m, n))
 
 
-_BOX = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+CLIP_BOX_DIRECTIONS = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 # Row offsets of the blocks of A: 6 Newton-Euler equalities, then 4 clipping-box rows on c and 4
 # rows |W| <= n w_M, then the torque and friction rows.
-_N_EQ: int = 6
-_ROW_TORQUE: int = _N_EQ + 8
+N_EQUILIBRIUM_ROWS: int = 6
+ROW_TORQUE: int = N_EQUILIBRIUM_ROWS + 8
 
 
-def _fill_equilibrium(a: FloatArray, b: FloatArray, feet: FloatArray, force: FloatArray, moment: FloatArray) -> None:
+def fill_equilibrium(a: FloatArray, b: FloatArray, feet: FloatArray, force: FloatArray, moment: FloatArray) -> None:
     """Rows 0-5 of ``A x + s = b`` (s = 0): Newton  sum_i f_i = F,  Euler  sum_i p_i x f_i + W - c x F = M,
     with ``force`` F [N] and ``moment`` M = L_dot - tau_ext [N m] (module docstring).
 
@@ -350,14 +350,14 @@ def _fill_equilibrium(a: FloatArray, b: FloatArray, feet: FloatArray, force: Flo
     b[..., 3:6] = moment
 
 
-def _torque_blocks(jac: FloatArray, lo: FloatArray, hi: FloatArray, bias: FloatArray) -> tuple[FloatArray, FloatArray]:
+def torque_blocks(jac: FloatArray, lo: FloatArray, hi: FloatArray, bias: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Per-foot torque rows ``J_i^T f_i <= delta_i - lo_i`` and ``-J_i^T f_i <= hi_i - delta_i``: blocks
     (..., n, 2 k, 3) and right-hand sides (..., n, 2 k), from jac (..., n, 3, k) and (..., n, k) arrays."""
     jt = np.swapaxes(jac, -1, -2)  # (..., n, k, 3)
     return np.concatenate([jt, -jt], axis=-2), np.concatenate([bias - lo, hi - bias], axis=-1)
 
 
-def _friction_blocks(normals: FloatArray, mu: Any, n_faces: int) -> FloatArray:
+def friction_blocks(normals: FloatArray, mu: Any, n_faces: int) -> FloatArray:
     """Per-foot friction rows (..., n, r, 3) from unit normals (..., n, 3) and mu (scalar or (...,)).
 
     Pyramid (``n_faces`` k > 0): d_j^T f - mu cos(pi/k) n^T f <= 0 for the k face directions d_j, then
@@ -401,36 +401,36 @@ def _build_problem(
     n_var = 4 + 3 * n
 
     # Torque rows: J_i^T f_i <= delta_i - lo_i and -J_i^T f_i <= hi_i - delta_i.
-    tau_blocks, tau_bounds = _torque_blocks(jac, lo, hi, bias)
+    tau_blocks, tau_bounds = torque_blocks(jac, lo, hi, bias)
     tau_b = tau_bounds.ravel()
     finite = np.isfinite(tau_b)
     all_finite = bool(finite.all())
     n_tau = tau_b.size if all_finite else int(finite.sum())
-    fric_blocks = _friction_blocks(normals, mu, n_faces)
-    row_fric = _ROW_TORQUE + n_tau
+    fric_blocks = friction_blocks(normals, mu, n_faces)
+    row_fric = ROW_TORQUE + n_tau
     n_rows = row_fric + fric_blocks.shape[0] * fric_blocks.shape[1]
 
     a = np.zeros((n_rows, n_var), order="F")
     b = np.zeros(n_rows)  # the friction rows' right-hand side stays 0
-    _fill_equilibrium(a, b, feet, force, moment)
+    fill_equilibrium(a, b, feet, force, moment)
     # Clipping box on c and aggregated contact-torque box.
-    a[_N_EQ : _N_EQ + 4, 0:2] = _BOX
-    a[_N_EQ + 4 : _ROW_TORQUE, 2:4] = _BOX
-    b[_N_EQ : _N_EQ + 4] = extent
-    b[_N_EQ + 4 : _ROW_TORQUE] = n * w_max
+    a[N_EQUILIBRIUM_ROWS : N_EQUILIBRIUM_ROWS + 4, 0:2] = CLIP_BOX_DIRECTIONS
+    a[N_EQUILIBRIUM_ROWS + 4 : ROW_TORQUE, 2:4] = CLIP_BOX_DIRECTIONS
+    b[N_EQUILIBRIUM_ROWS : N_EQUILIBRIUM_ROWS + 4] = extent
+    b[N_EQUILIBRIUM_ROWS + 4 : ROW_TORQUE] = n * w_max
     if all_finite:
-        a[_block_diag_index(n, 2 * k, _ROW_TORQUE)] = tau_blocks
-        b[_ROW_TORQUE:row_fric] = tau_b
+        a[_block_diag_index(n, 2 * k, ROW_TORQUE)] = tau_blocks
+        b[ROW_TORQUE:row_fric] = tau_b
     else:  # rows with an infinite bound are dropped
-        a[_ROW_TORQUE:row_fric] = _block_diag(tau_blocks)[finite]
-        b[_ROW_TORQUE:row_fric] = tau_b[finite]
+        a[ROW_TORQUE:row_fric] = _block_diag(tau_blocks)[finite]
+        b[ROW_TORQUE:row_fric] = tau_b[finite]
     a[_block_diag_index(n, fric_blocks.shape[1], row_fric)] = fric_blocks
 
-    cones = [clarabel.ZeroConeT(_N_EQ)]
+    cones = [clarabel.ZeroConeT(N_EQUILIBRIUM_ROWS)]
     if n_faces:
-        cones.append(clarabel.NonnegativeConeT(n_rows - _N_EQ))
+        cones.append(clarabel.NonnegativeConeT(n_rows - N_EQUILIBRIUM_ROWS))
     else:
-        cones.append(clarabel.NonnegativeConeT(row_fric - _N_EQ))
+        cones.append(clarabel.NonnegativeConeT(row_fric - N_EQUILIBRIUM_ROWS))
         cones += [clarabel.SecondOrderConeT(3)] * n
     return _Problem(_dense_to_csc(a), b, cones, n_var)
 
@@ -448,7 +448,7 @@ def _zero_p(n_var: int) -> sp.csc_matrix:
     return p
 
 
-class _SupportOracle:
+class SupportOracle:
     """Maximise a^T c over the equilibrium set, re-using one Clarabel solver across directions.
 
     Only the linear cost q changes between directions (``solver.update(q=...)``), so the
@@ -568,7 +568,7 @@ def solve_region(
     force, moment = wrench[:3], wrench[3:]
     prob = _build_problem(feet_s, nrm, mu_v, jac_s, lo, hi, bias_s, force, moment, n_faces, w_max, extent_v)
 
-    oracle = _SupportOracle(prob)
+    oracle = SupportOracle(prob)
     focus_v = None
     if focus is not None:
         focus_arr = as_array("focus", focus, (2,))

@@ -36,13 +36,13 @@ from numpy.typing import NDArray
 
 from margin_rl.stability.geometry.contact import solver_settings
 from margin_rl.stability.geometry.region import (
-    _BOX,
-    _N_EQ,
-    _ROW_TORQUE,
-    _fill_equilibrium,
-    _friction_blocks,
-    _SupportOracle,
-    _torque_blocks,
+    CLIP_BOX_DIRECTIONS,
+    N_EQUILIBRIUM_ROWS,
+    ROW_TORQUE,
+    SupportOracle,
+    fill_equilibrium,
+    friction_blocks,
+    torque_blocks,
 )
 
 __all__ = ["ProgramStructure", "ReusedRegionSolver", "program_values"]
@@ -82,9 +82,9 @@ class ProgramStructure:
         pattern = np.zeros((1, _row_friction(n, k) + n * _friction_rows(n_faces), 4 + 3 * n), dtype=bool)
         ones = np.ones((1, n, 3))
         # Every entry that a state may set: the equilibrium rows with non-zero data, the boxes, full blocks.
-        _fill_equilibrium(pattern, np.zeros(pattern.shape[:2]), ones, np.ones((1, 3)), np.ones((1, 3)))
-        pattern[0, _N_EQ:_ROW_TORQUE, 0:4] |= np.abs(_box_rows()) > 0
-        rows_tau, cols_tau = _block_index(n, 2 * k, _ROW_TORQUE)
+        fill_equilibrium(pattern, np.zeros(pattern.shape[:2]), ones, np.ones((1, 3)), np.ones((1, 3)))
+        pattern[0, N_EQUILIBRIUM_ROWS:ROW_TORQUE, 0:4] |= np.abs(_box_rows()) > 0
+        rows_tau, cols_tau = _block_index(n, 2 * k, ROW_TORQUE)
         pattern[0, rows_tau, cols_tau] = True
         rows_f, cols_f = _block_index(n, _friction_rows(n_faces), _row_friction(n, k))
         pattern[0, rows_f, cols_f] = True
@@ -97,11 +97,10 @@ class ProgramStructure:
     def cones(self) -> list[Any]:
         """Zero(6) x NonNeg(boxes, torques[, pyramid rows]) [x SOC(3)^n]."""
         if self.n_faces:
-            return [clarabel.ZeroConeT(_N_EQ), clarabel.NonnegativeConeT(self.n_rows - _N_EQ)]
+            return [clarabel.ZeroConeT(N_EQUILIBRIUM_ROWS), clarabel.NonnegativeConeT(self.n_rows - N_EQUILIBRIUM_ROWS)]
         row_friction = _row_friction(self.n_stance, self.n_joints)
-        return [clarabel.ZeroConeT(_N_EQ), clarabel.NonnegativeConeT(row_friction - _N_EQ)] + [
-            clarabel.SecondOrderConeT(3)
-        ] * self.n_stance
+        linear = [clarabel.ZeroConeT(N_EQUILIBRIUM_ROWS), clarabel.NonnegativeConeT(row_friction - N_EQUILIBRIUM_ROWS)]
+        return linear + [clarabel.SecondOrderConeT(3)] * self.n_stance
 
     def matrix(self, values: FloatArray) -> sp.csc_matrix:
         """``A`` of one state from its (nnz,) values (explicit zeros kept: the structure is the point)."""
@@ -113,14 +112,14 @@ def _friction_rows(n_faces: int) -> int:
 
 
 def _row_friction(n: int, k: int) -> int:
-    return _ROW_TORQUE + 2 * k * n
+    return ROW_TORQUE + 2 * k * n
 
 
 def _box_rows() -> FloatArray:
     """The 8 box rows on (c_x, c_y, W_x, W_y): |c| <= extent, then |W| <= n w_M."""
     out = np.zeros((8, 4))
-    out[0:4, 0:2] = _BOX
-    out[4:8, 2:4] = _BOX
+    out[0:4, 0:2] = CLIP_BOX_DIRECTIONS
+    out[4:8, 2:4] = CLIP_BOX_DIRECTIONS
     return out
 
 
@@ -158,25 +157,25 @@ def program_values(
         ValueError: a torque bound that is not finite (its row would be dropped: another structure).
     """
     n_states, n, k = jac.shape[0], structure.n_stance, structure.n_joints
-    tau_blocks, tau_b = _torque_blocks(jac, lo, hi, bias)
+    tau_blocks, tau_b = torque_blocks(jac, lo, hi, bias)
     if not np.isfinite(tau_b).all():
         raise ValueError("program_values needs finite torque bounds; solve such states with solve_region")
     a = np.zeros((n_states, structure.n_rows, structure.n_var))
     b = np.zeros((n_states, structure.n_rows))  # the friction rows' right-hand side stays 0
-    _fill_equilibrium(a, b, feet, force, moment)
-    a[:, _N_EQ:_ROW_TORQUE, 0:4] = _box_rows()
-    b[:, _N_EQ : _N_EQ + 4] = extent
-    b[:, _N_EQ + 4 : _ROW_TORQUE] = n * w_max
+    fill_equilibrium(a, b, feet, force, moment)
+    a[:, N_EQUILIBRIUM_ROWS:ROW_TORQUE, 0:4] = _box_rows()
+    b[:, N_EQUILIBRIUM_ROWS : N_EQUILIBRIUM_ROWS + 4] = extent
+    b[:, N_EQUILIBRIUM_ROWS + 4 : ROW_TORQUE] = n * w_max
     row_friction = _row_friction(n, k)
-    rows_tau, cols_tau = _block_index(n, 2 * k, _ROW_TORQUE)
+    rows_tau, cols_tau = _block_index(n, 2 * k, ROW_TORQUE)
     a[:, rows_tau, cols_tau] = tau_blocks
-    b[:, _ROW_TORQUE:row_friction] = tau_b.reshape(n_states, -1)
+    b[:, ROW_TORQUE:row_friction] = tau_b.reshape(n_states, -1)
     rows_f, cols_f = _block_index(n, _friction_rows(structure.n_faces), row_friction)
-    a[:, rows_f, cols_f] = _friction_blocks(normals, mu, structure.n_faces)
+    a[:, rows_f, cols_f] = friction_blocks(normals, mu, structure.n_faces)
     return a[:, structure.rows, structure.cols], b
 
 
-class ReusedRegionSolver(_SupportOracle):
+class ReusedRegionSolver(SupportOracle):
     """One Clarabel solver per :class:`ProgramStructure`, re-used for every state of that structure.
 
     Set up once from a *reference* program of the structure (its values fix Clarabel's equilibration,

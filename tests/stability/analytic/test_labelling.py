@@ -1,25 +1,26 @@
-"""The batched labelling path (learned margin v2, item 6) against the per-state path it replaces."""
+"""The contact problem (one state is a batch of one) and the batched labelling path against the per-state path."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from margin_rl.robot import load_robot
-from margin_rl.stability.analytic.contact_batch import contact_batch
+from margin_rl.stability.analytic.contact_problem import ContactProblem, contact_problem
+from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES, base_rotation_from_gravity_axis, from_lambda
 from margin_rl.stability.analytic.margin import (
     STATUSES,
     AnalyticSettings,
     _stance_programs,
     analytic_margin,
     analytic_margin_batch,
-    contact_problem,
 )
-from margin_rl.stability.analytic.sampling import sample_states
-from margin_rl.stability.geometry.contact import validate_contact_arrays
+from margin_rl.stability.analytic.sampling import sample_states, standing_state
+from margin_rl.stability.geometry.contact import CentroidalLoad, validate_contact_arrays
 from margin_rl.stability.geometry.region import _build_problem
 from margin_rl.stability.geometry.region_batch import ProgramStructure
 from margin_rl.stability.learned.dataset import DatasetError, DatasetSpec, generate, load_dataset
@@ -57,23 +58,62 @@ def test_batched_labels_do_not_depend_on_how_the_states_are_cut() -> None:
     np.testing.assert_array_equal(pieces.n_lps, whole.n_lps)
 
 
-def test_contact_batch_matches_the_single_state_problems() -> None:
+def test_one_state_is_a_batch_of_one() -> None:
+    """A state's problem does not depend on its batch: ``problem[i]`` of a batch equals the batch of one."""
     robot = load_robot("anymal_b")
     lams = sample_states(robot, 30, seed=8)
-    batch = contact_batch(robot, lams)
+    whole = contact_problem(robot, lams)
+    assert len(whole) == 30 and whole.solvable.sum() >= 25
+    for i in range(len(lams)):
+        alone, part = contact_problem(robot, lams[i : i + 1])[0], whole[i]
+        for f in fields(ContactProblem):
+            np.testing.assert_array_equal(getattr(alone, f.name), getattr(part, f.name), err_msg=f.name)
+
+
+def test_contact_problem_matches_the_robots_own_com_relative_ik() -> None:
+    """Cross-check against an independent path: the robot's batched CoM fixed point
+    (``Robot.inverse_kinematics_com_relative``), Pinocchio's Jacobians at its joint angles and the
+    gravito-inertial wrench of :class:`CentroidalLoad`."""
+    robot = load_robot("anymal_b")
+    lams = sample_states(robot, 30, seed=8)
+    problems = contact_problem(robot, lams)
     for i, lam in enumerate(lams):
-        problem = contact_problem(robot, lam)
-        if isinstance(problem, tuple):
-            assert not batch.solvable[i]
+        problem = problems[i]
+        if problem.status != "ok":
             continue
-        assert batch.solvable[i]
+        st = from_lambda(lam)
+        R = base_rotation_from_gravity_axis(st.gravity_axis)
+        ik, _ = robot.inverse_kinematics_com_relative(st.feet @ R, 10, 3e-5)
         # The same CoM fixed-point iterate (another iterate differs by ~1e-5 rad), up to rounding.
-        np.testing.assert_allclose(batch.joint_pos[i], problem.joint_pos, atol=1e-12)
-        np.testing.assert_allclose(batch.jacobians[i], problem.jacobians, atol=1e-12)
-        np.testing.assert_allclose(batch.leg_bias[i], problem.leg_bias, atol=1e-9)
-        np.testing.assert_allclose(batch.wrench[i], problem.gravito_inertial_wrench(), atol=1e-9)
-        np.testing.assert_allclose(batch.capture_point[i], problem.capture_point, atol=1e-15)
-        assert batch.com_height[i] == pytest.approx(problem.com_height, abs=1e-15)
+        np.testing.assert_allclose(problem.joint_pos, ik.joint_pos, atol=1e-12)
+        jacobians, dynamics = robot.jacobians_and_dynamics(
+            ik.joint_pos, base_rotation=R, com_acc=st.com_acc, base_ang_acc=st.base_ang_acc
+        )
+        np.testing.assert_allclose(problem.jacobians, jacobians, atol=1e-12)
+        np.testing.assert_allclose(problem.leg_bias, dynamics.bias_torques, atol=1e-9)
+        load = CentroidalLoad(robot.total_mass, st.com_acc, dynamics.ang_momentum_rate, st.ext_force, st.ext_torque)
+        np.testing.assert_allclose(problem.wrench, load.wrench(), atol=1e-9)
+        np.testing.assert_allclose(problem.wrench, problem.load().wrench(), atol=1e-12)
+        z = problem.com_height
+        np.testing.assert_allclose(problem.capture_point, st.com_vel[:2] * np.sqrt(z / robot.gravity), atol=1e-15)
+
+
+def test_contact_problem_statuses_and_messages() -> None:
+    robot = load_robot("anymal_c")
+    lam = standing_state(robot)
+    airborne = lam.copy()
+    airborne[LAMBDA_SLICES["contacts"]] = 0.0
+    far = lam.copy()
+    far[LAMBDA_SLICES["feet"].start] += 2.0  # the first foot 2 m away: no leg reaches it
+    problems = contact_problem(robot, np.stack([lam, airborne, far]))
+    assert [problems[i].status for i in range(3)] == ["ok", "no_contact", "unreachable"]
+    assert problems[1].message == "no foot in contact"
+    assert problems[2].message == f"unreachable feet: {robot.leg_names[0]}"
+    assert problems[0].message == "" and problems.solvable.tolist() == [True, False, False]
+    with pytest.raises(ValueError, match="lam\\[None\\]"):
+        contact_problem(robot, lam)
+    with pytest.raises(TypeError, match="single state"):
+        problems[0][0]
 
 
 @pytest.mark.parametrize("friction", [0, 6])
@@ -82,7 +122,7 @@ def test_program_values_are_those_of_the_single_state_assembly(friction: int) ->
     leaves out the entries that happen to be zero)."""
     robot = load_robot("anymal_c")
     lams = sample_states(robot, 40, seed=4)
-    batch = contact_batch(robot, lams)
+    batch = contact_problem(robot, lams)
     n_stance = batch.stance.sum(axis=1)
     checked = 0
     for n in (2, 3, 4):

@@ -13,7 +13,8 @@ from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, HalfspaceIntersection
 
 from margin_rl import load_robot
-from margin_rl.stability.analytic.margin import AnalyticSettings, analytic_margin, contact_problem
+from margin_rl.stability.analytic.contact_problem import contact_problem
+from margin_rl.stability.analytic.margin import AnalyticSettings, analytic_margin
 from margin_rl.stability.analytic.sampling import nominal_feet, standing_state
 from margin_rl.stability.fwp.feasibility import (
     FeasibleWrenchPolytope,
@@ -44,7 +45,7 @@ def robot():
 
 @pytest.fixture(scope="module")
 def problem(robot):
-    return contact_problem(robot, standing_state(robot))
+    return contact_problem(robot, standing_state(robot)[None])[0]
 
 
 def polytope(problem, stance=THREE, **over) -> FeasibleWrenchPolytope:

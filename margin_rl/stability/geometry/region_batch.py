@@ -9,7 +9,7 @@ friction model: only the values change. This module keeps that structure fixed:
 * :class:`ProgramStructure`: the structural non-zeros of ``A`` (every entry that may be non-zero for
   some state, in CSC order), the row count and the cones of one configuration (cached);
 * :func:`program_values`: ``A``'s values on that structure and ``b`` for a batch of states at once
-  (numpy over the batch, the same rows as ``region._build_problem``: shared helpers);
+  (numpy over the batch, the same rows as ``region_program.build_program``: shared helpers);
 * :class:`ReusedRegionSolver`: one Clarabel solver per structure whose data are replaced state by
   state (``update(A=..., b=...)``, no new set-up) and a support oracle for
   :func:`~margin_rl.stability.geometry.projection.iterative_projection`, with the robust retry of
@@ -34,10 +34,11 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from margin_rl.stability.geometry.contact import solver_settings
-from margin_rl.stability.geometry.region import (
+from margin_rl.stability.geometry.region_program import (
     CLIP_BOX_DIRECTIONS,
+    FAST_SETTINGS,
     N_EQUILIBRIUM_ROWS,
+    ROBUST_SETTINGS,
     ROW_TORQUE,
     SupportOracle,
     fill_equilibrium,
@@ -48,9 +49,6 @@ from margin_rl.stability.geometry.region import (
 __all__ = ["ProgramStructure", "ReusedRegionSolver", "program_values"]
 
 FloatArray = NDArray[np.float64]
-
-_FAST_SETTINGS = solver_settings(robust=False)
-_ROBUST_SETTINGS = solver_settings(robust=True)
 
 
 @dataclass(frozen=True)
@@ -150,7 +148,7 @@ def program_values(
 
     The stance feet's arrays: feet, unit normals (N, n, 3), mu (N,), jac (N, n, 3, k), torque bounds
     lo, hi and bias torques (N, n, k) (all finite), force and moment (N, 3) of the gravito-inertial
-    wrench. Equal, entry by entry, to ``region._build_problem`` of each state (whose ``A`` omits the
+    wrench. Equal, entry by entry, to ``region_program.build_program`` of each state (whose ``A`` omits the
     entries that happen to be zero).
 
     Raises:
@@ -195,7 +193,7 @@ class ReusedRegionSolver(SupportOracle):
         self._q = np.zeros(structure.n_var)
         self._values, self._b = reference_values, reference_b
         a = structure.matrix(reference_values)
-        self._fast = clarabel.DefaultSolver(self._p, self._q, a, reference_b, self._cones, _FAST_SETTINGS)
+        self._fast = clarabel.DefaultSolver(self._p, self._q, a, reference_b, self._cones, FAST_SETTINGS)
         self._robust: Any = None
         self.n_solves = self.n_retries = self.n_failed = 0
 
@@ -208,4 +206,4 @@ class ReusedRegionSolver(SupportOracle):
 
     def _new_robust_solver(self) -> Any:
         a = self.structure.matrix(self._values)
-        return clarabel.DefaultSolver(self._p, self._q, a, self._b, self._cones, _ROBUST_SETTINGS)
+        return clarabel.DefaultSolver(self._p, self._q, a, self._b, self._cones, ROBUST_SETTINGS)

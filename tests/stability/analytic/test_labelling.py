@@ -21,8 +21,8 @@ from margin_rl.stability.analytic.margin import (
 )
 from margin_rl.stability.analytic.sampling import sample_states, standing_state
 from margin_rl.stability.geometry.contact import CentroidalLoad, validate_contact_arrays
-from margin_rl.stability.geometry.region import _build_problem
 from margin_rl.stability.geometry.region_batch import ProgramStructure
+from margin_rl.stability.geometry.region_program import build_program
 from margin_rl.stability.learned.dataset import DatasetError, DatasetSpec, generate, load_dataset
 
 PER_STATE = AnalyticSettings(labelling="per_state")
@@ -118,7 +118,7 @@ def test_contact_problem_statuses_and_messages() -> None:
 
 @pytest.mark.parametrize("friction", [0, 6])
 def test_program_values_are_those_of_the_single_state_assembly(friction: int) -> None:
-    """On the fixed structure, A's values and b equal region._build_problem's of each state (whose A
+    """On the fixed structure, A's values and b equal region_program.build_program's of each state (whose A
     leaves out the entries that happen to be zero)."""
     robot = load_robot("anymal_c")
     lams = sample_states(robot, 40, seed=4)
@@ -137,7 +137,7 @@ def test_program_values_are_those_of_the_single_state_assembly(friction: int) ->
                 batch.leg_bias[i],
             )  # fmt: skip
             w = batch.wrench[i]
-            ref = _build_problem(pts, nrm, batch.mu[i], jac, lo, hi, bias, w[:3], w[3:], friction, 0.01, 10.0)
+            ref = build_program(pts, nrm, batch.mu[i], jac, lo, hi, bias, w[:3], w[3:], friction, 0.01, 10.0)
             np.testing.assert_array_equal(structure.matrix(values[j]).toarray(), ref.A.toarray())
             np.testing.assert_array_equal(b[j], ref.b)
             assert [repr(c) for c in structure.cones()] == [repr(c) for c in ref.cones]

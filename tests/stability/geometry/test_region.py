@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from scipy.optimize import linprog
 
 from margin_rl.stability.geometry import region as fr
+from margin_rl.stability.geometry import region_program
 from margin_rl.stability.geometry.contact import (
     gravito_inertial_wrench,
     parse_friction,
@@ -607,7 +608,7 @@ def test_failed_fast_solves_are_retried_with_the_robust_solver(monkeypatch: pyte
     ref = feasible_region(**kw)
     crippled = solver_settings(robust=False)
     crippled.max_iter = 2  # every fast solve stops with MaxIterations
-    monkeypatch.setattr(fr, "_FAST_SETTINGS", crippled)
+    monkeypatch.setattr(region_program, "FAST_SETTINGS", crippled)
     r = feasible_region(**kw)
     assert r.status == "ok" and r.converged
     assert r.n_lps == 2 * ref.n_lps
@@ -631,7 +632,7 @@ def test_halfspaces_of_degenerate_polygons() -> None:
 
 
 def reference_problem(args: tuple[Any, ...]) -> tuple[Any, np.ndarray, list[str]]:
-    """``(A, b, cones)`` of fr._build_problem assembled the plain way: dense row blocks stacked in the
+    """``(A, b, cones)`` of region_program.build_program assembled the plain way: dense row blocks stacked in the
     documented order, rows with an infinite torque bound dropped, scipy's dense-to-CSC conversion."""
     feet, normals, mu, jac, lo, hi, bias, force, moment, n_faces, w_max, extent = args
     n = jac.shape[0]
@@ -692,7 +693,7 @@ def test_problem_assembly_matches_the_plain_reference(
         kw["mass"], kw["com_acc"], kw["ang_momentum_rate"], kw["ext_force"], kw["ext_torque"], G
     )
     args = (feet, nrm, kw["mu"], jac, lo, hi, bias, wrench[:3], wrench[3:], parse_friction(friction), WM, 10.0)
-    prob = fr._build_problem(*args)
+    prob = region_program.build_program(*args)
     a_ref, b_ref, cones_ref = reference_problem(args)
     assert prob.A.shape == a_ref.shape and prob.n_var == a_ref.shape[1]
     np.testing.assert_array_equal(prob.A.indptr, a_ref.indptr)
@@ -708,7 +709,7 @@ def test_dense_to_csc_matches_scipy() -> None:
         a = np.where(rng.random(shape) < 0.3, rng.normal(size=shape), 0.0)
         a[:, 0] = 0.0  # an empty column
         for dense in (a, np.asfortranarray(a)):
-            got, ref = fr._dense_to_csc(dense), sp.csc_matrix(dense)
+            got, ref = region_program._dense_to_csc(dense), sp.csc_matrix(dense)
             np.testing.assert_array_equal(got.indptr, ref.indptr)
             np.testing.assert_array_equal(got.indices, ref.indices)
             np.testing.assert_array_equal(got.data, ref.data)

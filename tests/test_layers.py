@@ -62,8 +62,8 @@ FORBIDDEN_THIRD_PARTY = {
     "stability.geometry": ("gymnasium", "torch"),
     "robot": ("torch",),
 }
-ROBOT_AGNOSTIC = ("margin_rl.stability.fwp.polytope", "margin_rl.stability.fwp.programs")
-"""Modules outside stability.geometry that hold robot-agnostic criteria (seed 004's polytope and its programs)."""
+ROBOT_AGNOSTIC = tuple(f"margin_rl.stability.fwp.{name}" for name in ("polytope", "programs", "factor"))
+"""Modules outside stability.geometry that hold robot-agnostic criteria (seed 004's polytope, programs, factor)."""
 
 
 def source_modules() -> dict[str, Path]:

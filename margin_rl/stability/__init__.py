@@ -29,7 +29,8 @@ from margin_rl.stability.analytic.margin import (
     analytic_margin_batch,
 )
 from margin_rl.stability.analytic.sampling import SAMPLER_VERSION, TableI, sample_states
-from margin_rl.stability.fwp.feasibility import FWPFeasibility, feasible_wrench_polytope, fwp_feasibility
+from margin_rl.stability.fwp.feasibility import FWPFeasibility, fwp_feasibility
+from margin_rl.stability.fwp.polytope import feasible_wrench_polytope
 from margin_rl.stability.geometry.contact import CentroidalLoad, ContactSet, LegLimits
 from margin_rl.stability.geometry.icp import capture_point, stability_margin
 from margin_rl.stability.geometry.region import FeasibleRegion, RegionSettings, feasible_region, solve_region

@@ -16,21 +16,23 @@ from margin_rl import load_robot
 from margin_rl.stability.analytic.contact_problem import contact_problem
 from margin_rl.stability.analytic.margin import AnalyticSettings, analytic_margin
 from margin_rl.stability.analytic.sampling import nominal_feet, standing_state
-from margin_rl.stability.fwp.feasibility import (
-    FeasibleWrenchPolytope,
-    bounded_friction_cone,
-    contact_wrench_vertices,
+from margin_rl.stability.fwp.factor import (
     feasibility_factor,
-    feasible_wrench_polytope,
-    force_polytope,
-    friction_cone_edges,
-    fwp_feasibility,
     fwp_halfspaces,
-    gravito_inertial_wrench,
     halfspace_margin,
     minkowski_feasibility_factor,
     wrench_violations,
 )
+from margin_rl.stability.fwp.feasibility import fwp_feasibility
+from margin_rl.stability.fwp.polytope import (
+    FeasibleWrenchPolytope,
+    bounded_friction_cone,
+    contact_wrench_vertices,
+    feasible_wrench_polytope,
+    force_polytope,
+    friction_cone_edges,
+)
+from margin_rl.stability.geometry.contact import gravito_inertial_wrench
 from margin_rl.stability.geometry.region import feasible_region
 
 THREE = np.array([True, True, True, False])  # LF, RF, LH: RH lifted

@@ -18,7 +18,13 @@ ROOT = Path(__file__).resolve().parents[1]
 SOURCE_FOLDERS = {"margin_rl": "margin_rl", "envs": "margin_rl.envs", "train": "margin_rl.train"}
 """Repository folder -> the package it is installed as (pyproject's package-dir)."""
 
-BASE_MODULES = ("margin_rl.atomic", "margin_rl.plotting", "margin_rl.provenance", "margin_rl.registration")
+BASE_MODULES = (
+    "margin_rl.atomic",
+    "margin_rl.network",
+    "margin_rl.plotting",
+    "margin_rl.provenance",
+    "margin_rl.registration",
+)
 
 
 def layer_of(module: str) -> str:
@@ -143,7 +149,7 @@ def test_the_package_root_does_not_import_the_environments() -> None:
     code = (
         "import sys, gymnasium as gym, margin_rl\n"
         "assert 'margin_rl.envs' not in sys.modules, 'import margin_rl imported margin_rl.envs'\n"
-        "assert 'margin_rl/AnymalB-v0' in gym.registry and 'margin_rl/SLIPHopper-v0' in gym.registry\n"
+        "assert 'margin_rl/AnymalB-v1' in gym.registry and 'margin_rl/SLIPHopper-v0' in gym.registry\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
 
@@ -155,10 +161,10 @@ def test_a_fresh_interpreter_makes_an_env_through_the_module_syntax() -> None:
 
     code = (
         "import gymnasium as gym\n"
-        "env = gym.make('margin_rl:margin_rl/AnymalB-v0', margin='none')\n"
+        "env = gym.make('margin_rl:margin_rl/AnymalB-v1', margin='none')\n"
         "obs, _ = env.reset(seed=0)\n"
         "assert obs.shape == (48,)\n"
-        "vec = gym.make_vec('margin_rl/AnymalC-v0', num_envs=2, margin='none')\n"
+        "vec = gym.make_vec('margin_rl/AnymalC-v1', num_envs=2, margin='none')\n"
         "assert vec.reset(seed=0)[0].shape == (2, 48)\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)

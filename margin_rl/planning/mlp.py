@@ -1,9 +1,10 @@
 """The learned stability margin as a CasADi expression, built from the bundled weights.
 
-    m_l(lam) = s_y * (W_4 softsign(W_3 softsign(W_2 softsign(W_1 (lam - mu_x) / s_x + b_1) + b_2) + b_3) + b_4) + mu_y
+    m_l(lam) = W_4 softsign(W_3 softsign(W_2 softsign(W_1 lam + b_1) + b_2) + b_3) + b_4
 
-with softsign(z) = z / (1 + |z|) (seed 000 §IV-A), exactly the network of
-:class:`margin_rl.stability.LearnedMargin` (same weights and normalisation, read from its ``params``).
+with softsign(z) = z / (1 + |z|) (seed 000 §IV-A) and the input normalisation and output scaling folded into
+W_1, b_1 and W_4, b_4: the CasADi form of :attr:`margin_rl.stability.LearnedMargin.network`
+(:meth:`margin_rl.network.DenseNetwork.casadi`), the same folded weights as the numpy value and gradient.
 The function is written with MX matrix products on constant weight matrices, so a batch of nodes is one
 dense product per layer and its derivatives are exact reverse-mode AD (backpropagation). softsign is
 C1 (its second derivative jumps at 0), which is enough for IPOPT with a quasi-Newton Hessian.
@@ -16,8 +17,6 @@ evaluation (46 ms of a 60 ms IPOPT iteration, measured); the block-diagonal Jaco
 """
 
 from __future__ import annotations
-
-import numpy as np
 
 from margin_rl.stability import LAMBDA_DIM, LearnedMargin
 
@@ -37,28 +36,16 @@ def margin_function(model: LearnedMargin, n_columns: int = 1):  # -> casadi.Func
     """``m(lam) -> margin``: lam (47, n_columns) -> (1, n_columns) [m], one column per state.
 
     Raises:
-        ValueError: n_columns < 1.
+        ValueError: n_columns < 1, or weights of the physics architecture (its features have no CasADi form).
     """
     import casadi as ca
 
     if int(n_columns) != n_columns or n_columns < 1:
         raise ValueError(f"n_columns must be a positive integer, got {n_columns!r}")
-    p = model.params
+    if model.architecture != "paper":
+        raise ValueError(f"the planner's CasADi margin takes paper weights, got {model.architecture!r}")
     lam = ca.MX.sym("lam", LAMBDA_DIM, int(n_columns))
-    # Fold the input normalisation into the first layer and the output scaling into the last, as
-    # LearnedMargin does, so the expression is a plain chain of affine maps and softsigns.
-    W = [np.asarray(w, dtype=float) for w in p.weights]
-    b = [np.asarray(x, dtype=float) for x in p.biases]
-    W0 = W[0] / p.input_std[None, :]
-    b0 = b[0] - W0 @ p.input_mean
-    W_last = W[-1] * p.output_std
-    b_last = b[-1] * p.output_std + p.output_mean
-    layers = [(W0, b0), *zip(W[1:-1], b[1:-1], strict=True)]
-    h = lam
-    for Wk, bk in layers:
-        z = ca.mtimes(ca.DM(Wk), h) + ca.repmat(ca.DM(bk), 1, int(n_columns))
-        h = z / (1 + ca.fabs(z))
-    out = ca.mtimes(ca.DM(W_last), h) + ca.repmat(ca.DM(b_last), 1, int(n_columns))
+    out = model.network.casadi(lam)
     plain = ca.Function("learned_margin_plain", [lam], [out], ["lam"], ["margin"])
     # Block-diagonal Jacobian (n, 47 n) of vec(margin) w.r.t. vec(lam), from one reverse sweep.
     lam_j, out_j = ca.MX.sym("lam", LAMBDA_DIM, int(n_columns)), ca.MX.sym("margin", 1, int(n_columns))

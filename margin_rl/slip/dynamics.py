@@ -81,27 +81,35 @@ Energy bookkeeping
     :math:`E = \tfrac12 |\dot q|^2 + y + \tfrac12 k \delta^2` obeys
     :math:`\dot E = F \dot L_a - c \dot\delta^2` in stance, so
     :math:`E_1 = E_0 + W_{act} - W_{damp} - \tfrac12 k \delta_{lo}^2`, with apex energies
-    :math:`E = \tfrac12 \dot x^2 + y`.  Both simulators integrate :math:`W_{act}` and
+    :math:`E = \tfrac12 \dot x^2 + y`.  Both stance integrators integrate :math:`W_{act}` and
     :math:`W_{damp}` alongside the state so this identity can be checked.
 
-Two simulators are provided: :func:`simulate_hop`, a reference single-hop simulator built
-on :func:`scipy.integrate.solve_ivp` with event detection, and :func:`simulate_batch`, a
-vectorised fixed-step RK4 integrator over many hops at once with per-sample event location
-(bisection on the cubic Hermite interpolant of the step, then an exact RK4 re-step to the
-event time).  Flight phases are integrated in closed form by the batch simulator.
+One hop integrator: :func:`simulate_batch` runs the flights in closed form, the touchdown checks, the
+stance (:mod:`margin_rl.slip.stance`) and the liftoff and apex bookkeeping for many hops at once, and
+:func:`simulate_hop` is that batch for one hop.  The stance is integrated by ``method``: ``"rk4"``
+(vectorised fixed-step RK4 with per-hop event location, step ``dt``; the batch default, for data
+generation) or a :func:`scipy.integrate.solve_ivp` method such as ``"DOP853"`` (adaptive, per hop, with
+event detection; the single-hop default and the tight-tolerance reference).  The model's pieces
+(:class:`Status`, :class:`SlipParams`, :func:`actuator_profile`, :func:`apex_energy`) live in
+:mod:`margin_rl.slip.aslip` and are re-exported here.
 """
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import solve_ivp
+
+from margin_rl.slip.aslip import SlipParams as SlipParams
+from margin_rl.slip.aslip import Status as Status
+from margin_rl.slip.aslip import actuator_profile as actuator_profile
+from margin_rl.slip.aslip import apex_energy as apex_energy
+from margin_rl.slip.stance import FALL, LIFTOFF, SLIP, StanceEnd, integrate_adaptive, integrate_rk4
 
 __all__ = [
+    "ADAPTIVE_METHODS",
     "BatchResult",
     "HopResult",
     "SlipParams",
@@ -114,108 +122,22 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-
-
-class Status(enum.IntEnum):
-    """Outcome of one hop from apex to apex (0 means success)."""
-
-    OK = 0
-    FALL = 1
-    SLIP = 2
-    NO_LIFTOFF = 3
-    NO_APEX = 4
-    NO_TOUCHDOWN = 5
-
-
-@dataclass(frozen=True)
-class SlipParams:
-    """Nondimensional aSLIP parameters.
-
-    Parameters
-    ----------
-    stiffness : float
-        Leg spring stiffness :math:`k` in :math:`[m g / l_0]` (paper: 20).
-    damping_ratio : float
-        :math:`\\zeta = c / (2\\sqrt{k m})` (paper: 0.1).
-    friction : float
-        Coulomb friction coefficient :math:`\\mu` (paper: 0.5).
-    extension_time : float
-        Duration :math:`T_e` of the actuator smoothstep in :math:`[\\sqrt{l_0/g}]`.  Not given
-        in the paper; 0.1 is about a third of the decompression half of a stance.
-    max_stance_time : float
-        Stance longer than this is a ``NO_LIFTOFF`` failure (a loaded stance lasts about
-        :math:`\\pi/\\sqrt{k} \\approx 0.7`).
-    """
-
-    stiffness: float = 20.0
-    damping_ratio: float = 0.1
-    friction: float = 0.5
-    extension_time: float = 0.1
-    max_stance_time: float = 3.0
-
-    def __post_init__(self) -> None:
-        checks = {
-            "stiffness": self.stiffness > 0,
-            "damping_ratio": self.damping_ratio >= 0,
-            "friction": self.friction >= 0,
-            "extension_time": self.extension_time > 0,
-            "max_stance_time": self.max_stance_time > 0,
-        }
-        for name, ok in checks.items():
-            value = getattr(self, name)
-            if not (ok and np.isfinite(value)):
-                raise ValueError(f"SlipParams.{name} is invalid: {value!r}")
-
-    @property
-    def damping(self) -> float:
-        """Damping coefficient :math:`c = 2 \\zeta \\sqrt{k m}` with :math:`m = 1`."""
-        return 2.0 * self.damping_ratio * float(np.sqrt(self.stiffness))
-
-
-# ----------------------------------------------------------------------------------------
-# Shared model pieces
-# ----------------------------------------------------------------------------------------
-
-
-def actuator_profile(tau: ArrayLike, delta_l: ArrayLike, extension_time: float) -> tuple[FloatArray, FloatArray]:
-    """Actuator length and rate, :math:`L_a` and :math:`\\dot L_a`, ``tau`` after max compression.
-
-    Returns zeros for ``tau <= 0`` (before maximum compression, or ``tau = -inf``).
-    """
-    tau_arr = np.asarray(tau, dtype=float)
-    dl = np.asarray(delta_l, dtype=float)
-    sigma = np.clip(tau_arr / extension_time, 0.0, 1.0)
-    length = dl * sigma * sigma * (3.0 - 2.0 * sigma)
-    rate = dl * 6.0 * sigma * (1.0 - sigma) / extension_time
-    return length, rate
-
-
-def apex_energy(y: ArrayLike, xdot: ArrayLike) -> FloatArray:
-    """Mechanical energy at an apex, :math:`E = \\dot x^2 / 2 + y` in :math:`[m g l_0]`."""
-    return 0.5 * np.square(np.asarray(xdot, dtype=float)) + np.asarray(y, dtype=float)
-
-
-def _stance_rhs(
-    t: FloatArray | float,
-    z: FloatArray,
-    t_mc: FloatArray | float,
-    delta_l: FloatArray | float,
-    p: SlipParams,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Stance vector field on ``z = [x - x_f, y, xdot, ydot, W_act, W_damp]`` (rows).
-
-    Works on shape ``(6,)`` or ``(6, n)``.  Returns ``(dz, ldot, F)`` so that callers get the
-    quantities their event functions need without recomputation.
-    """
-    xr, y, vx, vy = z[0], z[1], z[2], z[3]
-    length = np.sqrt(xr * xr + y * y)
-    ldot = (xr * vx + y * vy) / length
-    la, la_dot = actuator_profile(np.asarray(t) - t_mc, delta_l, p.extension_time)
-    delta_dot = la_dot - ldot
-    force = p.stiffness * (1.0 + la - length) + p.damping * delta_dot
-    f_over_l = force / length
-    dz = np.stack([vx, vy, f_over_l * xr, f_over_l * y - 1.0, force * la_dot, p.damping * delta_dot * delta_dot])
-    return dz, ldot, force
+_Integrator = Callable[[FloatArray, FloatArray, FloatArray, SlipParams], StanceEnd]
+_HOP_SCALARS = (
+    "t_touchdown",
+    "t_max_compression",
+    "t_liftoff",
+    "t_apex",
+    "foot_x",
+    "energy0",
+    "energy1",
+    "work_actuator",
+    "work_damping",
+    "leg_energy_loss",
+)
+_PATH_STEP = 0.01  # the longest time between two recorded path points
+ADAPTIVE_METHODS = ("DOP853", "RK45", "RK23", "Radau", "BDF", "LSODA")
+"""The :func:`scipy.integrate.solve_ivp` methods a stance can be integrated with (besides ``"rk4"``)."""
 
 
 def _validate_batch(states: ArrayLike, actions: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -238,9 +160,38 @@ def _validate_batch(states: ArrayLike, actions: ArrayLike) -> tuple[FloatArray, 
     return s, a
 
 
-# ----------------------------------------------------------------------------------------
-# Reference single-hop simulator (solve_ivp with events)
-# ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BatchResult:
+    """Outcome of :func:`simulate_batch` for ``n`` hops (same fields as :class:`HopResult`).
+
+    ``status`` holds :class:`Status` codes (``int8``); rows that did not reach a phase are NaN.
+    ``n_steps``: RK4 steps of the batch, or (adaptive ``method``) accepted solver steps summed over hops.
+    """
+
+    status: NDArray[np.int8]
+    next_apex: FloatArray
+    touchdown: FloatArray
+    liftoff: FloatArray
+    failure: FloatArray
+    t_touchdown: FloatArray
+    t_max_compression: FloatArray
+    t_liftoff: FloatArray
+    t_apex: FloatArray
+    foot_x: FloatArray
+    energy0: FloatArray
+    energy1: FloatArray
+    work_actuator: FloatArray
+    work_damping: FloatArray
+    leg_energy_loss: FloatArray
+    n_steps: int = field(default=0)
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """Boolean mask of hops that reached the next apex."""
+        return self.status == Status.OK
+
+    def __len__(self) -> int:
+        return int(self.status.shape[0])
 
 
 @dataclass(frozen=True)
@@ -298,327 +249,39 @@ class HopResult:
         """:math:`E_1 - (E_0 + W_{act} - W_{damp} - E_{leg})`; zero up to integration error."""
         return self.energy1 - (self.energy0 + self.work_actuator - self.work_damping - self.leg_energy_loss)
 
-
-_EventFn = Callable[[float, FloatArray], float]
-
-
-def _event(fun: _EventFn, direction: float) -> _EventFn:
-    """Mark a scalar function as a terminal solve_ivp event with the given direction."""
-
-    def wrapped(t: float, z: FloatArray) -> float:
-        return fun(t, z)
-
-    wrapped.terminal = True  # type: ignore[attr-defined]
-    wrapped.direction = direction  # type: ignore[attr-defined]
-    return wrapped
+    @classmethod
+    def from_batch(cls, result: BatchResult, i: int = 0, path: FloatArray | None = None) -> HopResult:
+        """Row ``i`` of a :class:`BatchResult`."""
+        arrays = {k: getattr(result, k)[i].copy() for k in ("next_apex", "touchdown", "liftoff", "failure")}
+        scalars = {k: float(getattr(result, k)[i]) for k in _HOP_SCALARS}
+        return cls(status=Status(int(result.status[i])), **arrays, **scalars, path=path)
 
 
-def simulate_hop(
-    state: ArrayLike,
-    action: ArrayLike,
-    params: SlipParams | None = None,
-    *,
-    rtol: float = 1e-10,
-    atol: float = 1e-12,
-    method: str = "DOP853",
-    record_path: bool = False,
-) -> HopResult:
-    """Simulate one hop with :func:`scipy.integrate.solve_ivp` and event detection.
-
-    This is the slow, accurate reference (all phases, including flight, are integrated
-    numerically so the guards are exercised as events).
-
-    Parameters
-    ----------
-    state : array_like, shape (2,)
-        Apex state ``[y0, xdot0]``.
-    action : array_like, shape (2,)
-        ``[alpha, delta_L]`` (rad, :math:`[l_0]`).
-    params : SlipParams, optional
-        Model parameters (paper defaults).
-    rtol, atol : float
-        Integrator tolerances.
-    method : str
-        ``solve_ivp`` method.
-    record_path : bool
-        Keep the body path (``HopResult.path``), sampled at most every 0.01 time units.
-    """
-    p = params if params is not None else SlipParams()
-    s, a = _validate_batch(
-        np.reshape(np.asarray(state, dtype=float), (1, -1)), np.reshape(np.asarray(action, dtype=float), (1, -1))
+def _stance_integrator(method: str, dt: float, rtol: float, atol: float, record_path: bool) -> _Integrator:
+    """``integrate(z, t, dl, p) -> StanceEnd`` for ``method`` (module docstring)."""
+    if method == "rk4":
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be positive and finite; got {dt!r}")
+        return lambda z, t, dl, p: integrate_rk4(z, t, dl, p, dt, record_path)
+    if method not in ADAPTIVE_METHODS:
+        raise ValueError(f"unknown method {method!r}; known: rk4, {', '.join(ADAPTIVE_METHODS)}")
+    return lambda z, t, dl, p: integrate_adaptive(
+        z, t, dl, p, method=method, rtol=rtol, atol=atol, record_path=record_path
     )
-    y0, vx0 = float(s[0, 0]), float(s[0, 1])
-    alpha, delta_l = float(a[0, 0]), float(a[0, 1])
-    nan4 = np.full(4, np.nan)
-    info: dict[str, object] = {
-        "touchdown": nan4,
-        "liftoff": nan4,
-        "failure": nan4,
-        "t_touchdown": np.nan,
-        "t_max_compression": np.nan,
-        "t_liftoff": np.nan,
-        "t_apex": np.nan,
-        "foot_x": np.nan,
-        "work_actuator": 0.0,
-        "work_damping": 0.0,
-        "leg_energy_loss": 0.0,
-    }
-    energy0 = float(apex_energy(y0, vx0))
-    path: list[FloatArray] = [np.array([[0.0, 0.0, y0]])]
-    extra = {"max_step": 0.01} if record_path else {}
-
-    def keep(sol: object, x_offset: float = 0.0) -> None:
-        if record_path:
-            tt, yy = sol.t, sol.y  # type: ignore[attr-defined]
-            path.append(np.column_stack([tt, yy[0] + x_offset, yy[1]]))
-
-    def finish(status: Status, next_apex: FloatArray | None = None) -> HopResult:
-        nxt = np.full(3, np.nan) if next_apex is None else next_apex
-        e1 = float(apex_energy(nxt[1], nxt[2])) if next_apex is not None else np.nan
-        trace = np.vstack(path) if record_path else None
-        return HopResult(status=status, next_apex=nxt, energy0=energy0, energy1=e1, path=trace, **info)  # type: ignore[arg-type]
-
-    cos_a, sin_a = np.cos(alpha), np.sin(alpha)
-    if y0 < cos_a:
-        info["failure"] = np.array([0.0, y0, vx0, 0.0])
-        return finish(Status.NO_TOUCHDOWN)
-
-    # Flight 1: integrate the ballistic flight to the touchdown guard y = cos(alpha).
-    flight = lambda t, z: np.array([z[2], z[3], 0.0, -1.0])  # noqa: E731
-    z_ap = np.array([0.0, y0, vx0, 0.0])
-    if y0 > cos_a:
-        td_event = _event(lambda t, z: z[1] - cos_a, -1.0)
-        sol = solve_ivp(
-            flight, (0.0, np.sqrt(2.0 * y0) + 1.0), z_ap, method=method, events=td_event, rtol=rtol, atol=atol, **extra
-        )
-        keep(sol)
-        t_td, z_td = float(sol.t_events[0][0]), sol.y_events[0][0].copy()
-        z_td[1] = cos_a  # land exactly on the guard
-    else:
-        t_td, z_td = 0.0, z_ap
-    x_f = float(z_td[0] + sin_a)
-    info.update(touchdown=z_td.copy(), t_touchdown=t_td, foot_x=x_f)
-
-    xr_td = -sin_a
-    ldot_td = xr_td * z_td[2] + cos_a * z_td[3]
-    if ldot_td > 0.0:
-        info["failure"] = z_td.copy()
-        return finish(Status.FALL)
-    if abs(sin_a) > p.friction * cos_a:
-        info["failure"] = z_td.copy()
-        return finish(Status.SLIP)
-
-    # Stance, in segments: compression (L_a = 0) until max compression, the actuator ramp,
-    # then constant extension.  Splitting at the profile's kinks keeps the adaptive
-    # integrator from stepping across a discontinuous second derivative.
-    mu = p.friction
-    z = np.array([xr_td, cos_a, z_td[2], z_td[3], 0.0, 0.0])
-    t = t_td
-    t_end_stance = t_td + p.max_stance_time
-    t_mc = np.inf
-    segment = 0
-    while True:
-        mc_known = np.isfinite(t_mc)
-
-        def rhs(tt: float, zz: FloatArray, _t_mc: float = t_mc) -> FloatArray:
-            return _stance_rhs(tt, zz, _t_mc, delta_l, p)[0]
-
-        events = [
-            _event(lambda tt, zz, _t_mc=t_mc: float(_stance_rhs(tt, zz, _t_mc, delta_l, p)[2]), -1.0),
-            _event(lambda tt, zz: mu * zz[1] - abs(zz[0]), -1.0),
-            _event(lambda tt, zz: zz[1], -1.0),
-        ]
-        names = [Status.OK, Status.SLIP, Status.FALL]  # OK here means "liftoff"
-        if not mc_known:
-            events.append(_event(lambda tt, zz: float(_stance_rhs(tt, zz, np.inf, delta_l, p)[1]), 1.0))
-            seg_end = t_end_stance
-        elif segment == 1:
-            seg_end = min(t_mc + p.extension_time, t_end_stance)
-        else:
-            seg_end = t_end_stance
-        sol = solve_ivp(rhs, (t, seg_end), z, method=method, events=events, rtol=rtol, atol=atol, **extra)
-        keep(sol, x_f)
-        hit = [(float(te[0]), i) for i, te in enumerate(sol.t_events) if te.size]
-        if not hit:
-            t, z = float(sol.t[-1]), sol.y[:, -1].copy()
-            if t >= t_end_stance:
-                info.update(
-                    work_actuator=float(z[4]),
-                    work_damping=float(z[5]),
-                    failure=np.array([z[0] + x_f, z[1], z[2], z[3]]),
-                )
-                return finish(Status.NO_LIFTOFF)
-            segment += 1
-            continue
-        t_ev, i_ev = min(hit)
-        z = sol.y_events[i_ev][0].copy()
-        t = t_ev
-        info.update(work_actuator=float(z[4]), work_damping=float(z[5]))
-        world = np.array([z[0] + x_f, z[1], z[2], z[3]])
-        if i_ev == 3:  # maximum compression: start the actuator
-            t_mc = t
-            info["t_max_compression"] = t
-            segment = 1
-            continue
-        if names[i_ev] is not Status.OK:
-            info["failure"] = world
-            return finish(names[i_ev])
-        # Liftoff: F = 0, residual spring compression is lost in the massless leg.
-        la, _ = actuator_profile(t - t_mc, delta_l, p.extension_time)
-        delta_lo = 1.0 + float(la) - float(np.hypot(z[0], z[1]))
-        info.update(liftoff=world, t_liftoff=t, leg_energy_loss=0.5 * p.stiffness * delta_lo**2)
-        break
-
-    z_lo = np.array(info["liftoff"], dtype=float)
-    if z_lo[3] <= 0.0:
-        info["failure"] = z_lo
-        return finish(Status.NO_APEX)
-    apex_event = _event(lambda tt, zz: zz[3], -1.0)
-    sol = solve_ivp(
-        flight, (t, t + z_lo[3] + 1.0), z_lo, method=method, events=apex_event, rtol=rtol, atol=atol, **extra
-    )
-    keep(sol)
-    z_ap1 = sol.y_events[0][0]
-    info["t_apex"] = float(sol.t_events[0][0])
-    return finish(Status.OK, np.array([z_ap1[0], z_ap1[1], z_ap1[2]]))
 
 
-# ----------------------------------------------------------------------------------------
-# Batched fixed-step simulator
-# ----------------------------------------------------------------------------------------
+def _flight_path(t0: float, t1: float, x0: float, y0: float, vx: float, vy: float) -> FloatArray:
+    """Rows ``[t, x, y]`` of a ballistic flight from ``t0`` to ``t1``, at most ``_PATH_STEP`` apart."""
+    tt = np.append(np.arange(t0, t1, _PATH_STEP), t1)
+    tau = tt - t0
+    return np.column_stack([tt, x0 + vx * tau, y0 + vy * tau - 0.5 * tau * tau])
 
 
-@dataclass(frozen=True)
-class BatchResult:
-    """Outcome of :func:`simulate_batch` for ``n`` hops (same fields as :class:`HopResult`).
-
-    ``status`` holds :class:`Status` codes (``int8``); rows that did not reach a phase are NaN.
-    """
-
-    status: NDArray[np.int8]
-    next_apex: FloatArray
-    touchdown: FloatArray
-    liftoff: FloatArray
-    failure: FloatArray
-    t_touchdown: FloatArray
-    t_max_compression: FloatArray
-    t_liftoff: FloatArray
-    t_apex: FloatArray
-    foot_x: FloatArray
-    energy0: FloatArray
-    energy1: FloatArray
-    work_actuator: FloatArray
-    work_damping: FloatArray
-    leg_energy_loss: FloatArray
-    n_steps: int = field(default=0)
-
-    @property
-    def valid(self) -> NDArray[np.bool_]:
-        """Boolean mask of hops that reached the next apex."""
-        return self.status == Status.OK
-
-    def __len__(self) -> int:
-        return int(self.status.shape[0])
-
-
-def _rk4_step(
-    t: FloatArray,
-    z: FloatArray,
-    k1: FloatArray,
-    h: FloatArray,
-    t_mc: FloatArray,
-    dl: FloatArray,
-    p: SlipParams,
-) -> FloatArray:
-    """One classical RK4 step of per-sample size ``h`` (``k1`` = vector field at ``(t, z)``)."""
-    half = 0.5 * h
-    k2 = _stance_rhs(t + half, z + half * k1, t_mc, dl, p)[0]
-    k3 = _stance_rhs(t + half, z + half * k2, t_mc, dl, p)[0]
-    k4 = _stance_rhs(t + h, z + h * k3, t_mc, dl, p)[0]
-    return z + (h / 6.0) * (k1 + 2.0 * (k2 + k3) + k4)
-
-
-def _hermite(
-    z0: FloatArray, z1: FloatArray, f0: FloatArray, f1: FloatArray, h: FloatArray, theta: FloatArray
-) -> FloatArray:
-    """Cubic Hermite interpolant of a step at fraction ``theta`` (O(h^4) accurate)."""
-    t2 = theta * theta
-    t3 = t2 * theta
-    return (2 * t3 - 3 * t2 + 1) * z0 + (t3 - 2 * t2 + theta) * h * f0 + (-2 * t3 + 3 * t2) * z1 + (t3 - t2) * h * f1
-
-
-# Event kinds of the batch integrator, in priority order when two land at the same time.
-_EV_FALL, _EV_SLIP, _EV_LIFTOFF, _EV_MAXCOMP = 0, 1, 2, 3
-
-
-def _event_values(
-    kind: int, t: FloatArray, z: FloatArray, t_mc: FloatArray, dl: FloatArray, p: SlipParams
-) -> FloatArray:
-    """Event function oriented so that crossing from ``> 0`` (or ``>= 0``) to the other side fires."""
-    if kind == _EV_FALL:
-        return z[1]
-    if kind == _EV_SLIP:
-        return p.friction * z[1] - np.abs(z[0])
-    _, ldot, force = _stance_rhs(t, z, t_mc, dl, p)
-    if kind == _EV_LIFTOFF:
-        return force
-    return -ldot
-
-
-def _locate(
-    kind: int,
-    t0: FloatArray,
-    z0: FloatArray,
-    z1: FloatArray,
-    f0: FloatArray,
-    f1: FloatArray,
-    h: FloatArray,
-    t_mc: FloatArray,
-    dl: FloatArray,
-    p: SlipParams,
-    iters: int = 48,
-) -> FloatArray:
-    """Bisection for the crossing time (as a fraction of ``h``) on the Hermite interpolant."""
-    lo = np.zeros_like(h)
-    hi = np.ones_like(h)
-    for _ in range(iters):
-        mid = 0.5 * (lo + hi)
-        g = _event_values(kind, t0 + mid * h, _hermite(z0, z1, f0, f1, h, mid), t_mc, dl, p)
-        after = g <= 0.0 if kind != _EV_SLIP else g < 0.0
-        hi = np.where(after, mid, hi)
-        lo = np.where(after, lo, mid)
-    return hi
-
-
-def simulate_batch(
-    states: ArrayLike,
-    actions: ArrayLike,
-    params: SlipParams | None = None,
-    *,
-    dt: float = 0.01,
-) -> BatchResult:
-    """Simulate many hops at once (vectorised fixed-step RK4 with per-sample events).
-
-    Flight is integrated in closed form; stance with RK4 of step ``dt`` in
-    :math:`[\\sqrt{l_0/g}]`.  Steps are shortened per sample so that none straddles the end
-    of the actuator ramp.  When an event function changes sign over a step, its crossing
-    time is found by bisection on the step's cubic Hermite interpolant, and the sample is
-    re-stepped exactly (RK4) to the earliest crossing.
-
-    Parameters
-    ----------
-    states : array_like, shape (n, 2)
-        Apex states ``[y0, xdot0]``.
-    actions : array_like, shape (n, 2)
-        ``[alpha, delta_L]``.
-    params : SlipParams, optional
-        Model parameters.
-    dt : float
-        Stance step size; 0.01 agrees with the tight-tolerance reference to ~1e-7.
-    """
-    p = params if params is not None else SlipParams()
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be positive and finite; got {dt!r}")
+def _simulate(
+    states: ArrayLike, actions: ArrayLike, p: SlipParams, integrate: _Integrator, record_path: bool = False
+) -> tuple[BatchResult, list[FloatArray] | None]:
+    """The hops of ``states`` (n, 2) under ``actions`` (n, 2): flights in closed form, touchdown checks, the
+    stance by ``integrate`` (:func:`_stance_integrator`), liftoff and apex; and the paths when recorded."""
     s, a = _validate_batch(states, actions)
     n = s.shape[0]
     y0, vx0 = s[:, 0], s[:, 1]
@@ -651,85 +314,26 @@ def simulate_batch(
     status[slip_td] = Status.SLIP
     failure[fall_td | slip_td] = touchdown[fall_td | slip_td]
 
-    # ---- stance (fixed-step RK4 over the active subset, compacted as hops finish)
-    idx = np.flatnonzero(has_td & ~fall_td & ~slip_td)
-    z = np.vstack([-sin_a[idx], cos_a[idx], vx0[idx], -t_fall[idx], np.zeros(idx.size), np.zeros(idx.size)])
-    t = t_fall[idx].copy()
-    t_stop = t + p.max_stance_time
-    t_mc = np.full(idx.size, np.inf)
-    dl = dl_all[idx].copy()
-    k1, ldot, force = _stance_rhs(t, z, t_mc, dl, p)
-    n_steps = 0
-    while idx.size:
-        n_steps += 1
-        ramp_end = t_mc + p.extension_time
-        h = np.where((t < ramp_end) & (t + dt > ramp_end), ramp_end - t, dt)
-        z_new = _rk4_step(t, z, k1, h, t_mc, dl, p)
-        t_new = t + h
-        k1_new, ldot_new, force_new = _stance_rhs(t_new, z_new, t_mc, dl, p)
-
-        slip_old = p.friction * z[1] - np.abs(z[0])
-        slip_new = p.friction * z_new[1] - np.abs(z_new[0])
-        fired = np.stack(
-            [
-                (z[1] > 0.0) & (z_new[1] <= 0.0),
-                (slip_old >= 0.0) & (slip_new < 0.0),
-                (force > 0.0) & (force_new <= 0.0),
-                np.isinf(t_mc) & (ldot < 0.0) & (ldot_new >= 0.0),
-            ]
-        )
-        any_fired = fired.any(axis=0)
-        done_kind = np.full(idx.size, -1)
-        if any_fired.any():
-            j = np.flatnonzero(any_fired)
-            theta = np.full((4, j.size), np.inf)
-            for kind in range(4):
-                sel = fired[kind, j]
-                if sel.any():
-                    jj = j[sel]
-                    theta[kind, sel] = _locate(
-                        kind, t[jj], z[:, jj], z_new[:, jj], k1[:, jj], k1_new[:, jj], h[jj], t_mc[jj], dl[jj], p
-                    )
-            first = np.argmin(theta, axis=0)  # ties resolve to the lower (higher-priority) kind
-            h_ev = theta[first, np.arange(j.size)] * h[j]
-            z_ev = _rk4_step(t[j], z[:, j], k1[:, j], h_ev, t_mc[j], dl[j], p)
-            t_ev = t[j] + h_ev
-            z_new[:, j] = z_ev
-            t_new[j] = t_ev
-            mc = first == _EV_MAXCOMP
-            t_mc[j[mc]] = t_ev[mc]
-            k1_ev, ldot_ev, force_ev = _stance_rhs(t_ev, z_ev, t_mc[j], dl[j], p)
-            k1_new[:, j], ldot_new[j], force_new[j] = k1_ev, ldot_ev, force_ev
-            done_kind[j[~mc]] = first[~mc]
-
-        timeout = (done_kind < 0) & (t_new >= t_stop)
-        finished = (done_kind >= 0) | timeout
-        if finished.any():
-            f = np.flatnonzero(finished)
-            g = idx[f]
-            zf = z_new[:, f]
-            world = np.vstack([zf[0] + foot_x[g], zf[1], zf[2], zf[3]]).T
-            w_act[g], w_damp[g] = zf[4], zf[5]
-            kinds = done_kind[f]
-            codes = np.select(
-                [kinds == _EV_FALL, kinds == _EV_SLIP, kinds == _EV_LIFTOFF],
-                [Status.FALL, Status.SLIP, Status.OK],
-                default=Status.NO_LIFTOFF,
-            )
-            status[g] = codes
-            lo = kinds == _EV_LIFTOFF
-            failure[g[~lo]] = world[~lo]
-            liftoff[g[lo]] = world[lo]
-            t_lo[g[lo]] = t_new[f][lo]
-            la, _ = actuator_profile(t_new[f] - t_mc[f], dl[f], p.extension_time)
-            delta_lo = 1.0 + la - np.hypot(zf[0], zf[1])
-            leg_loss[g[lo]] = 0.5 * p.stiffness * delta_lo[lo] ** 2
-            t_mc_out[g] = np.where(np.isfinite(t_mc[f]), t_mc[f], np.nan)
-            keep = ~finished
-            idx, z_new, t_new, t_stop = idx[keep], z_new[:, keep], t_new[keep], t_stop[keep]
-            t_mc, dl = t_mc[keep], dl[keep]
-            k1_new, ldot_new, force_new = k1_new[:, keep], ldot_new[keep], force_new[keep]
-        z, t, k1, ldot, force = z_new, t_new, k1_new, ldot_new, force_new
+    # ---- stance, from the touchdown state [x - x_f, y, xdot, ydot, W_act = 0, W_damp = 0]
+    g = np.flatnonzero(has_td & ~fall_td & ~slip_td)
+    z0 = np.vstack([-sin_a[g], cos_a[g], vx0[g], -t_fall[g], np.zeros(g.size), np.zeros(g.size)])
+    dl = dl_all[g].copy()
+    end = integrate(z0, t_fall[g].copy(), dl, p)
+    zf, kinds = end.z, end.kind
+    world = np.vstack([zf[0] + foot_x[g], zf[1], zf[2], zf[3]]).T
+    w_act[g], w_damp[g] = zf[4], zf[5]
+    status[g] = np.select(
+        [kinds == FALL, kinds == SLIP, kinds == LIFTOFF], [Status.FALL, Status.SLIP, Status.OK], Status.NO_LIFTOFF
+    )
+    lo = kinds == LIFTOFF
+    failure[g[~lo]] = world[~lo]
+    liftoff[g[lo]] = world[lo]
+    t_lo[g[lo]] = end.t[lo]
+    # Liftoff: F = 0 with the spring still compressed; that energy is lost in the massless leg.
+    la, _ = actuator_profile(end.t - end.t_mc, dl, p.extension_time)
+    delta_lo = 1.0 + la - np.hypot(zf[0], zf[1])
+    leg_loss[g[lo]] = 0.5 * p.stiffness * delta_lo[lo] ** 2
+    t_mc_out[g] = np.where(np.isfinite(end.t_mc), end.t_mc, np.nan)
 
     # ---- flight 2 (closed form) to the next apex
     lifted = (status == Status.OK) & np.isfinite(t_lo)
@@ -743,7 +347,7 @@ def simulate_batch(
     )
     t_ap[ok] = t_lo[ok] + vy_lo
     energy1 = np.where(ok, apex_energy(next_apex[:, 1], next_apex[:, 2]), np.nan)
-    return BatchResult(
+    result = BatchResult(
         status=status,
         next_apex=next_apex,
         touchdown=touchdown,
@@ -759,8 +363,91 @@ def simulate_batch(
         work_actuator=w_act,
         work_damping=w_damp,
         leg_energy_loss=leg_loss,
-        n_steps=n_steps,
+        n_steps=end.n_steps,
     )
+    if not record_path:
+        return result, None
+    paths = []
+    stance_paths = dict(zip(g.tolist(), end.paths or [], strict=True))
+    for i in range(n):
+        pieces = [np.array([[0.0, 0.0, y0[i]]])]
+        if has_td[i]:
+            pieces.append(_flight_path(0.0, t_fall[i], 0.0, y0[i], vx0[i], 0.0))
+        if i in stance_paths:
+            pieces.append(stance_paths[i] + [0.0, foot_x[i], 0.0])
+        if ok[i]:
+            x_lo, y_lo, vx_lo, vy = liftoff[i]
+            pieces.append(_flight_path(t_lo[i], t_ap[i], x_lo, y_lo, vx_lo, vy))
+        paths.append(np.vstack(pieces))
+    return result, paths
+
+
+def simulate_batch(
+    states: ArrayLike,
+    actions: ArrayLike,
+    params: SlipParams | None = None,
+    *,
+    dt: float = 0.01,
+    method: str = "rk4",
+    rtol: float = 1e-10,
+    atol: float = 1e-12,
+) -> BatchResult:
+    """Simulate many hops at once (module docstring): flights in closed form, stance by ``method``.
+
+    Parameters
+    ----------
+    states : array_like, shape (n, 2)
+        Apex states ``[y0, xdot0]``.
+    actions : array_like, shape (n, 2)
+        ``[alpha, delta_L]``.
+    params : SlipParams, optional
+        Model parameters.
+    dt : float
+        Stance step size of ``method="rk4"`` in :math:`[\\sqrt{l_0/g}]`; 0.01 agrees with the
+        tight-tolerance reference to ~1e-7.
+    method : str
+        ``"rk4"`` (vectorised fixed step, :func:`~margin_rl.slip.stance.integrate_rk4`) or a
+        :func:`scipy.integrate.solve_ivp` method (adaptive, per hop,
+        :func:`~margin_rl.slip.stance.integrate_adaptive`).
+    rtol, atol : float
+        Tolerances of an adaptive ``method``.
+    """
+    p = params if params is not None else SlipParams()
+    return _simulate(states, actions, p, _stance_integrator(method, dt, rtol, atol, False))[0]
+
+
+def simulate_hop(
+    state: ArrayLike,
+    action: ArrayLike,
+    params: SlipParams | None = None,
+    *,
+    rtol: float = 1e-10,
+    atol: float = 1e-12,
+    method: str = "DOP853",
+    dt: float = 0.01,
+    record_path: bool = False,
+) -> HopResult:
+    """One hop: :func:`simulate_batch` of one, by default with the adaptive reference stance integrator.
+
+    Parameters
+    ----------
+    state : array_like, shape (2,)
+        Apex state ``[y0, xdot0]``.
+    action : array_like, shape (2,)
+        ``[alpha, delta_L]`` (rad, :math:`[l_0]`).
+    params : SlipParams, optional
+        Model parameters (paper defaults).
+    rtol, atol, method, dt
+        As in :func:`simulate_batch` (``method="rk4"`` gives exactly the batch's numbers).
+    record_path : bool
+        Keep the body path (``HopResult.path``), sampled at most every 0.01 time units (an adaptive
+        ``method`` then limits its step to 0.01).
+    """
+    p = params if params is not None else SlipParams()
+    states = np.reshape(np.asarray(state, dtype=float), (1, -1))
+    actions = np.reshape(np.asarray(action, dtype=float), (1, -1))
+    result, paths = _simulate(states, actions, p, _stance_integrator(method, dt, rtol, atol, record_path), record_path)
+    return HopResult.from_batch(result, 0, paths[0] if paths else None)
 
 
 def return_map(

@@ -12,16 +12,18 @@ with fixed input normalisation to the eq. (13) box (:math:`c_{in}` its centre,
 :math:`r_{in}` its half-widths) and output de-normalisation from the training targets.
 :math:`P` outputs ``[dx, y1, xdot1]`` and :math:`M` outputs the scalar margin.
 
-Weights are bundled as ``.npz`` (no pickle) next to a JSON card that records the SHA-256 of
-each file; :func:`load_bundle` refuses files whose checksum does not match.  The same
-weights evaluate in numpy (:meth:`MLP.__call__`, :meth:`MLP.jacobian`) and symbolically in
-CasADi (:meth:`MLP.casadi`, for the planner's exact derivatives); training uses the PyTorch
-twin in :mod:`margin_rl.slip.train`, so this module does not import torch.
+Weights are bundled as ``.npz`` (no pickle; the layers and the four normalisation vectors, float32) next to
+a JSON card that records the SHA-256 of each file; :func:`load_bundle` refuses files whose checksum does
+not match and folds each network's normalisation into its layers, giving a
+:class:`margin_rl.network.DenseNetwork`: numpy value and Jacobian, and the CasADi expression the planner
+uses for exact derivatives. Training uses :func:`margin_rl.network.torch_sequential` in
+:mod:`margin_rl.slip.train`, so this module does not import torch.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,21 +31,40 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from margin_rl.provenance import sha256_file
+from margin_rl.network import (
+    DenseNetwork,
+    layer_arrays,
+    read_arrays,
+    read_layers,
+    save_arrays,
+    verify_sha256,
+    write_card,
+)
 from margin_rl.slip.margin import BOX_HIGH, BOX_LOW
 
 __all__ = [
+    "ACTIVATION",
     "BUNDLE_DIR",
-    "MLP",
+    "ROLES",
     "Bundle",
+    "box_normalisation",
     "load_bundle",
+    "load_network",
+    "network_arrays",
+    "network_from_arrays",
+    "save_bundle",
 ]
 
 FloatArray = NDArray[np.float64]
 
 #: Where the trained weights ship inside the package.
 BUNDLE_DIR = Path(__file__).resolve().parent / "weights"
-_KEYS = ("W0", "b0", "W1", "b1", "W2", "b2", "in_offset", "in_scale", "out_offset", "out_scale")
+#: The two networks of a bundle, each in ``<role>.npz``.
+ROLES = ("return_map", "margin")
+#: Hidden-layer activation of both networks.
+ACTIVATION = "relu"
+_N_LAYERS = 3
+_NORMALISATION = ("in_offset", "in_scale", "out_offset", "out_scale")
 
 
 def box_normalisation() -> tuple[FloatArray, FloatArray]:
@@ -51,119 +72,52 @@ def box_normalisation() -> tuple[FloatArray, FloatArray]:
     return 0.5 * (BOX_LOW + BOX_HIGH), 0.5 * (BOX_HIGH - BOX_LOW)
 
 
-@dataclass(frozen=True)
-class MLP:
-    """A 2-hidden-layer ReLU network with fixed affine input/output normalisation.
+def network_arrays(
+    weights: tuple[ArrayLike, ...],
+    biases: tuple[ArrayLike, ...],
+    in_offset: ArrayLike,
+    in_scale: ArrayLike,
+    out_offset: ArrayLike,
+    out_scale: ArrayLike,
+) -> dict[str, NDArray[np.float32]]:
+    """A network's file content: layers ``W0..W2``, ``b0..b2`` and the normalisation vectors, float32."""
+    if len(weights) != _N_LAYERS:
+        raise ValueError(f"the SLIP networks have {_N_LAYERS} layers, got {len(weights)}")
+    normalisation = dict(zip(_NORMALISATION, (in_offset, in_scale, out_offset, out_scale), strict=True))
+    return layer_arrays(weights, biases) | {k: np.asarray(v, dtype=np.float32) for k, v in normalisation.items()}
 
-    ``weights[i]`` has shape ``(out, in)`` (PyTorch's ``Linear`` convention).
+
+def network_from_arrays(arrays: Mapping[str, ArrayLike]) -> DenseNetwork:
+    """The network of :func:`network_arrays`' content, its normalisation folded into the layers.
+
+    Raises
+    ------
+    ValueError
+        If an array is missing or the shapes are inconsistent.
     """
+    try:
+        weights, biases = read_layers(arrays, _N_LAYERS)
+        norm = {k: np.asarray(arrays[k], dtype=np.float64) for k in _NORMALISATION}
+    except KeyError as exc:
+        raise ValueError(f"weight arrays lack {exc.args[0]!r}") from exc
+    n_in, n_out = weights[0].shape[1], weights[-1].shape[0]
+    for key, size in zip(_NORMALISATION, (n_in, n_in, n_out, n_out), strict=True):
+        if norm[key].shape != (size,):
+            raise ValueError(f"{key} must have shape ({size},), got {norm[key].shape}")
+    return DenseNetwork.fold(weights, biases, ACTIVATION, **norm)
 
-    weights: tuple[FloatArray, FloatArray, FloatArray]
-    biases: tuple[FloatArray, FloatArray, FloatArray]
-    in_offset: FloatArray
-    in_scale: FloatArray
-    out_offset: FloatArray
-    out_scale: FloatArray
 
-    def __post_init__(self) -> None:
-        dims = [self.weights[0].shape[1]] + [w.shape[0] for w in self.weights]
-        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            if w.ndim != 2 or w.shape[1] != dims[i] or b.shape != (w.shape[0],):
-                raise ValueError(f"layer {i} has inconsistent shapes: W {w.shape}, b {b.shape}")
-        if self.in_offset.shape != (dims[0],) or self.in_scale.shape != (dims[0],):
-            raise ValueError("in_offset/in_scale must match the input dimension")
-        if self.out_offset.shape != (dims[-1],) or self.out_scale.shape != (dims[-1],):
-            raise ValueError("out_offset/out_scale must match the output dimension")
-
-    @property
-    def in_dim(self) -> int:
-        return int(self.weights[0].shape[1])
-
-    @property
-    def out_dim(self) -> int:
-        return int(self.weights[-1].shape[0])
-
-    # -------------------------------------------------------------------- numpy
-
-    def __call__(self, z: ArrayLike) -> FloatArray:
-        """Evaluate on ``z`` of shape ``(n, in_dim)`` or ``(in_dim,)``."""
-        x = (np.asarray(z, dtype=float) - self.in_offset) / self.in_scale
-        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            x = x @ w.T + b
-            if i < 2:
-                x = np.maximum(x, 0.0)
-        return self.out_offset + self.out_scale * x
-
-    def jacobian(self, z: ArrayLike) -> FloatArray:
-        """Exact Jacobian :math:`\\partial f / \\partial z` at one point, shape ``(out, in)``.
-
-        ReLU's derivative is taken as 0 at 0 (as PyTorch and CasADi's ``fmax`` do).
-        """
-        x = (np.asarray(z, dtype=float).reshape(-1) - self.in_offset) / self.in_scale
-        jac = np.diag(1.0 / self.in_scale)
-        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            x = w @ x + b
-            jac = w @ jac
-            if i < 2:
-                active = x > 0.0
-                x = np.where(active, x, 0.0)
-                jac = jac * active[:, None]
-        return self.out_scale[:, None] * jac
-
-    # -------------------------------------------------------------------- casadi
-
-    def casadi(self, z: Any) -> Any:
-        """The same function as a CasADi expression of the column vector ``z`` (SX or MX)."""
-        import casadi as ca
-
-        x = (z - ca.DM(self.in_offset)) / ca.DM(self.in_scale)
-        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            x = ca.mtimes(ca.DM(w), x) + ca.DM(b)
-            if i < 2:
-                x = ca.fmax(x, 0.0)
-        return ca.DM(self.out_offset) + ca.DM(self.out_scale) * x
-
-    # -------------------------------------------------------------------- files
-
-    def arrays(self) -> dict[str, FloatArray]:
-        """Plain arrays for :func:`numpy.savez`."""
-        out = {f"W{i}": w for i, w in enumerate(self.weights)}
-        out.update({f"b{i}": b for i, b in enumerate(self.biases)})
-        out.update(
-            in_offset=self.in_offset, in_scale=self.in_scale, out_offset=self.out_offset, out_scale=self.out_scale
-        )
-        return out
-
-    @classmethod
-    def from_arrays(cls, arrays: dict[str, ArrayLike]) -> MLP:
-        missing = [k for k in _KEYS if k not in arrays]
-        if missing:
-            raise ValueError(f"weight arrays lack {missing}")
-
-        def get(k: str) -> FloatArray:
-            return np.asarray(arrays[k], dtype=float)
-
-        return cls(
-            weights=(get("W0"), get("W1"), get("W2")),
-            biases=(get("b0"), get("b1"), get("b2")),
-            in_offset=get("in_offset"),
-            in_scale=get("in_scale"),
-            out_offset=get("out_offset"),
-            out_scale=get("out_scale"),
-        )
-
-    @classmethod
-    def load(cls, path: Path | str) -> MLP:
-        with np.load(Path(path), allow_pickle=False) as data:
-            return cls.from_arrays({k: data[k] for k in data.files})
+def load_network(path: Path | str) -> DenseNetwork:
+    """A network from its ``.npz`` file (without checking a card)."""
+    return network_from_arrays(read_arrays(path))
 
 
 @dataclass(frozen=True)
 class Bundle:
     """Trained return map ``P``, margin ``M`` and their model card."""
 
-    return_map: MLP
-    margin: MLP
+    return_map: DenseNetwork
+    margin: DenseNetwork
     card: dict[str, Any]
 
 
@@ -179,12 +133,22 @@ def load_bundle(directory: Path | str = BUNDLE_DIR) -> Bundle:
     """
     root = Path(directory)
     card = json.loads((root / "card.json").read_text())
-    nets: dict[str, MLP] = {}
-    for role in ("return_map", "margin"):
+    nets: dict[str, DenseNetwork] = {}
+    for role in ROLES:
         entry = card["files"][role]
         path = root / entry["file"]
-        digest = sha256_file(path)
-        if digest != entry["sha256"]:
-            raise ValueError(f"checksum mismatch for {path}: card says {entry['sha256']}, file is {digest}")
-        nets[role] = MLP.load(path)
+        verify_sha256(path, entry["sha256"])
+        nets[role] = load_network(path)
     return Bundle(return_map=nets["return_map"], margin=nets["margin"], card=card)
+
+
+def save_bundle(
+    directory: Path | str, arrays: Mapping[str, Mapping[str, ArrayLike]], card: Mapping[str, Any]
+) -> dict[str, Any]:
+    """Write ``<role>.npz`` for both :data:`ROLES` (``arrays[role]``: :func:`network_arrays`) and ``card.json``,
+    atomically; the card gains ``files`` (name and SHA-256 of each) and is returned."""
+    root = Path(directory)
+    files = {role: {"file": f"{role}.npz", "sha256": save_arrays(root / f"{role}.npz", arrays[role])} for role in ROLES}
+    full = {**card, "files": files}
+    write_card(root / "card.json", full)
+    return full

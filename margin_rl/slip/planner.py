@@ -42,9 +42,10 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from margin_rl.network import DenseNetwork
 from margin_rl.slip.dynamics import SlipParams, Status, simulate_batch, simulate_hop
 from margin_rl.slip.margin import BOX_HIGH, BOX_LOW
-from margin_rl.slip.models import MLP, Bundle, load_bundle
+from margin_rl.slip.models import Bundle, load_bundle
 
 __all__ = [
     "PAPER_TABLE_I",
@@ -156,7 +157,7 @@ class PlanResult:
 class FootstepPlanner:
     """Builds the CasADi/IPOPT NLP once for a configuration; :meth:`solve` per task."""
 
-    def __init__(self, return_map: MLP, margin: MLP, config: PlannerConfig) -> None:
+    def __init__(self, return_map: DenseNetwork, margin: DenseNetwork, config: PlannerConfig) -> None:
         import casadi as ca
 
         if return_map.in_dim != 4 or return_map.out_dim != 3:

@@ -7,7 +7,8 @@ r"""Train :math:`P(s, a)` and :math:`M(s, a)` on a generated data set (paper §I
   distance :math:`b` (eq. 5).
 
 Both use Adam with learning rate :math:`10^{-3}` and mini-batches.  Metrics are computed on a
-held-out split by the exported numpy networks (so the export itself is tested).  Fig. 4 is
+held-out split by the exported networks, folded from the float32 arrays written to the files (so the
+export itself is tested).  Fig. 4 is
 reproduced as the *valid-label precision* :math:`|\{M > \varepsilon\} \cap V| / |\{M > \varepsilon\}|`
 and the *recall of valid points* :math:`|\{M > \varepsilon\} \cap V| / |V|` against the
 threshold :math:`\varepsilon`.
@@ -34,11 +35,17 @@ import torch
 from numpy.typing import NDArray
 from torch import nn
 
-from margin_rl.atomic import atomic_savez, atomic_write_bytes
-from margin_rl.provenance import sha256_file
+from margin_rl.network import DenseNetwork, torch_sequential
 from margin_rl.slip.dataset import SlipDataset, load_dataset
 from margin_rl.slip.margin import PREDICTION_WEIGHTS
-from margin_rl.slip.models import BUNDLE_DIR, MLP, box_normalisation
+from margin_rl.slip.models import (
+    ACTIVATION,
+    BUNDLE_DIR,
+    box_normalisation,
+    network_arrays,
+    network_from_arrays,
+    save_bundle,
+)
 
 __all__ = [
     "PAPER_OPERATING_POINT",
@@ -60,7 +67,8 @@ PAPER_OPERATING_POINT = {"epsilon": 0.05, "precision": 0.97, "recall": 0.59}
 
 
 class TorchMLP(nn.Module):
-    """PyTorch twin of :class:`margin_rl.slip.models.MLP` (2 x 64 ReLU by default)."""
+    """The trainable network: ``out_offset + out_scale * body((z - in_offset) / in_scale)`` with ``body``
+    the layers of :func:`margin_rl.network.torch_sequential` (2 x 64 ReLU by default), in normalised units."""
 
     def __init__(
         self,
@@ -72,9 +80,7 @@ class TorchMLP(nn.Module):
     ) -> None:
         super().__init__()
         n_in, n_out = int(np.size(in_offset)), int(np.size(out_offset))
-        self.body = nn.Sequential(
-            nn.Linear(n_in, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, n_out)
-        )
+        self.body = torch_sequential((n_in, hidden, hidden, n_out), ACTIVATION)
         for name, value in (
             ("in_offset", in_offset),
             ("in_scale", in_scale),
@@ -86,20 +92,20 @@ class TorchMLP(nn.Module):
     def forward(self, z: torch.Tensor) -> torch.Tensor:
         return self.out_offset + self.out_scale * self.body((z - self.in_offset) / self.in_scale)
 
-    def export(self) -> MLP:
-        """Copy the weights into the numpy :class:`MLP` (float32 values, as trained)."""
+    def export(self) -> dict[str, NDArray[np.float32]]:
+        """The weights as the file content of :func:`margin_rl.slip.models.network_arrays` (float32, as trained)."""
         lin = [m for m in self.body if isinstance(m, nn.Linear)]
 
-        def arr(t: torch.Tensor) -> FloatArray:
-            return t.detach().cpu().numpy().astype(np.float32).astype(np.float64)
+        def arr(t: torch.Tensor) -> NDArray[np.float32]:
+            return t.detach().cpu().numpy().astype(np.float32)
 
-        return MLP(
-            weights=(arr(lin[0].weight), arr(lin[1].weight), arr(lin[2].weight)),
-            biases=(arr(lin[0].bias), arr(lin[1].bias), arr(lin[2].bias)),
-            in_offset=arr(self.in_offset),
-            in_scale=arr(self.in_scale),
-            out_offset=arr(self.out_offset),
-            out_scale=arr(self.out_scale),
+        return network_arrays(
+            tuple(arr(layer.weight) for layer in lin),
+            tuple(arr(layer.bias) for layer in lin),
+            arr(self.in_offset),
+            arr(self.in_scale),
+            arr(self.out_offset),
+            arr(self.out_scale),
         )
 
 
@@ -122,10 +128,13 @@ class TrainConfig:
             raise ValueError(f"lr must be positive; got {self.lr}")
 
 
-def fit(z: FloatArray, target: FloatArray, weights: FloatArray, config: TrainConfig) -> tuple[MLP, list[float]]:
+def fit(
+    z: FloatArray, target: FloatArray, weights: FloatArray, config: TrainConfig
+) -> tuple[dict[str, NDArray[np.float32]], list[float]]:
     """Fit a :class:`TorchMLP` by Adam on the loss :math:`\\mathrm{mean}_i \\sum_j w_j e_{ij}^2`.
 
-    Returns the exported network and the loss history (one value per 100 iterations).
+    Returns the exported network (its file content, :meth:`TorchMLP.export`; evaluate it with
+    :func:`~margin_rl.slip.models.network_from_arrays`) and the loss history (one value per 100 iterations).
     """
     if z.ndim != 2 or target.ndim != 2 or z.shape[0] != target.shape[0]:
         raise ValueError(f"z {z.shape} and target {target.shape} must be (n, d) with equal n")
@@ -158,7 +167,7 @@ def fit(z: FloatArray, target: FloatArray, weights: FloatArray, config: TrainCon
 # ---------------------------------------------------------------------------- metrics
 
 
-def return_map_metrics(net: MLP, z: FloatArray, next_apex: FloatArray) -> dict[str, Any]:
+def return_map_metrics(net: DenseNetwork, z: FloatArray, next_apex: FloatArray) -> dict[str, Any]:
     """Held-out accuracy of :math:`P` on valid samples."""
     err = net(z) - next_apex
     weighted = np.sum(PREDICTION_WEIGHTS * err * err, axis=1)
@@ -181,7 +190,7 @@ def threshold_curve(pred: FloatArray, valid: NDArray[np.bool_], eps: FloatArray)
     return precision, recall
 
 
-def margin_metrics(net: MLP, z: FloatArray, margin: FloatArray, valid: NDArray[np.bool_]) -> dict[str, Any]:
+def margin_metrics(net: DenseNetwork, z: FloatArray, margin: FloatArray, valid: NDArray[np.bool_]) -> dict[str, Any]:
     """Held-out accuracy of :math:`M`: regression error and valid/invalid classification."""
     pred = net(z)[:, 0]
     prec, rec = threshold_curve(pred, valid, np.array([0.0, PAPER_OPERATING_POINT["epsilon"]]))
@@ -267,10 +276,11 @@ def train_bundle(
     valid = data.valid
     t0 = time.perf_counter()
     tr_v = train_idx[valid[train_idx]]
-    p_net, p_hist = fit(data.z[tr_v], data.next_apex[tr_v], PREDICTION_WEIGHTS, config)
+    p_arrays, p_hist = fit(data.z[tr_v], data.next_apex[tr_v], PREDICTION_WEIGHTS, config)
     t_p = time.perf_counter() - t0
-    m_net, m_hist = fit(data.z[train_idx], data.margin[train_idx, None], np.ones(1), config)
+    m_arrays, m_hist = fit(data.z[train_idx], data.margin[train_idx, None], np.ones(1), config)
     t_m = time.perf_counter() - t0 - t_p
+    p_net, m_net = network_from_arrays(p_arrays), network_from_arrays(m_arrays)
 
     te_v = test_idx[valid[test_idx]]
     metrics = {
@@ -278,9 +288,6 @@ def train_bundle(
         "margin": margin_metrics(m_net, data.z[test_idx], data.margin[test_idx], valid[test_idx]),
         "final_train_loss": {"return_map": p_hist[-1] if p_hist else None, "margin": m_hist[-1] if m_hist else None},
     }
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_savez(out / "return_map.npz", **{k: v.astype(np.float32) for k, v in p_net.arrays().items()})
-    atomic_savez(out / "margin.npz", **{k: v.astype(np.float32) for k, v in m_net.arrays().items()})
     if figure is not None:
         plot_threshold_curve(m_net(data.z[test_idx])[:, 0], valid[test_idx], figure)
     card: dict[str, Any] = {
@@ -310,13 +317,8 @@ def train_bundle(
         },
         "metrics_test": metrics,
         "paper": {"fig4_operating_point": PAPER_OPERATING_POINT},
-        "files": {
-            "return_map": {"file": "return_map.npz", "sha256": sha256_file(out / "return_map.npz")},
-            "margin": {"file": "margin.npz", "sha256": sha256_file(out / "margin.npz")},
-        },
     }
-    atomic_write_bytes(out / "card.json", (json.dumps(card, indent=2) + "\n").encode())
-    return card
+    return save_bundle(out, {"return_map": p_arrays, "margin": m_arrays}, card)
 
 
 def _parse(argv: Sequence[str] | None) -> argparse.Namespace:

@@ -1,4 +1,4 @@
-"""Tests of the aSLIP hop simulators (reference solve_ivp and batched RK4)."""
+"""Tests of the aSLIP hop integrator: one hop is a batch of one; the stance by batched RK4 or solve_ivp."""
 
 from __future__ import annotations
 
@@ -197,6 +197,45 @@ def test_batch_matches_solve_ivp_reference() -> None:
             np.testing.assert_allclose(batch.liftoff[i], ref.liftoff, atol=1e-6)
             assert batch.t_max_compression[i] == pytest.approx(ref.t_max_compression, abs=1e-6)
     assert n_ok >= 8  # the comparison must cover successful hops
+
+
+def test_a_hop_is_a_batch_of_one() -> None:
+    """simulate_hop is row i of simulate_batch with the same stance method, to the last bit."""
+    states, actions = _random_feasible(12, seed=5)
+    states[0], actions[0] = [0.9, 0.2], [0.1, 0.05]  # no touchdown
+    for method in ("rk4", "DOP853"):
+        batch = simulate_batch(states, actions, method=method)
+        for i in range(len(states)):
+            hop = simulate_hop(states[i], actions[i], method=method)
+            assert int(hop.status) == int(batch.status[i])
+            for name in ("next_apex", "touchdown", "liftoff", "failure"):
+                np.testing.assert_array_equal(getattr(hop, name), getattr(batch, name)[i])
+            for name in ("t_max_compression", "t_liftoff", "t_apex", "energy1", "work_damping", "leg_energy_loss"):
+                np.testing.assert_array_equal(getattr(hop, name), getattr(batch, name)[i])
+            assert isinstance(hop.t_apex, float) and isinstance(hop.status, Status)
+    assert simulate_batch(states, actions, method="rk4").n_steps > 0
+
+
+@pytest.mark.parametrize("method", ["DOP853", "rk4"])
+def test_recorded_path_runs_from_apex_to_apex(method: str) -> None:
+    hop = simulate_hop([1.1, 0.3], [0.1, 0.03], method=method, record_path=True)
+    assert hop.ok and hop.path is not None
+    t, x, y = hop.path.T
+    np.testing.assert_array_equal(hop.path[0], [0.0, 0.0, 1.1])
+    np.testing.assert_allclose(hop.path[-1], [hop.t_apex, *hop.next_apex[:2]], atol=1e-12)
+    assert np.all(np.diff(t) >= 0) and np.max(np.diff(t)) <= 0.01 + 1e-12
+    flight = t <= hop.t_touchdown
+    np.testing.assert_allclose(y[flight], 1.1 - 0.5 * t[flight] ** 2, atol=1e-12)  # ballistic, closed form
+    np.testing.assert_allclose(x[flight], 0.3 * t[flight], atol=1e-12)
+    stance = (t > hop.t_touchdown) & (t < hop.t_liftoff)
+    assert stance.sum() > 10 and np.all(y[stance] < 1.0)
+    failed = simulate_hop([0.995, 0.934], [-0.394, 0.035], method=method, record_path=True)
+    assert failed.status is Status.FALL and failed.path[-1, 0] == pytest.approx(failed.t_touchdown)
+
+
+def test_unknown_method_is_refused() -> None:
+    with pytest.raises(ValueError, match="unknown method"):
+        simulate_hop([0.9, 0.2], [0.1, 0.05], method="euler")  # refused even when no stance is integrated
 
 
 def test_return_map_marks_failures_nan() -> None:

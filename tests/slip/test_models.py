@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 import torch
 
+from margin_rl.network import DenseNetwork, read_arrays
 from margin_rl.slip.dataset import DatasetConfig, generate_dataset, load_dataset
 from margin_rl.slip.margin import PREDICTION_WEIGHTS, label_samples, sample_box
-from margin_rl.slip.models import BUNDLE_DIR, MLP, box_normalisation, load_bundle
+from margin_rl.slip.models import BUNDLE_DIR, box_normalisation, load_bundle, network_arrays, network_from_arrays
 from margin_rl.slip.train import TorchMLP, TrainConfig, fit, threshold_curve, train_bundle
 
 
@@ -55,30 +56,43 @@ def test_bundled_networks_match_the_simulator(bundle) -> None:  # type: ignore[n
 
 
 def test_numpy_torch_and_casadi_agree(bundle) -> None:  # type: ignore[no-untyped-def]
+    """The three forms of the folded network: values and Jacobians to 1e-12 (float64)."""
     import casadi as ca
 
-    net: MLP = bundle.return_map
+    net: DenseNetwork = bundle.return_map
     z = sample_box(50, np.random.default_rng(7))
-    twin = TorchMLP(net.in_offset, net.in_scale, net.out_offset, net.out_scale)
-    lin = [m for m in twin.body if isinstance(m, torch.nn.Linear)]
+    module = net.torch_module(torch.float64)
     with torch.no_grad():
-        for layer, w, b in zip(lin, net.weights, net.biases, strict=True):
-            layer.weight.copy_(torch.as_tensor(w))
-            layer.bias.copy_(torch.as_tensor(b))
-        torch_out = twin(torch.as_tensor(z, dtype=torch.float32)).numpy()
-    np.testing.assert_allclose(torch_out, net(z), atol=1e-5)
-
+        np.testing.assert_allclose(module(torch.as_tensor(z)).numpy(), net(z), rtol=0, atol=1e-12)
     zs = ca.SX.sym("z", 4)
     expr = net.casadi(zs)
     f = ca.Function("f", [zs], [expr, ca.jacobian(expr, zs)])
     for row in z[:10]:
+        torch_jac = torch.autograd.functional.jacobian(module, torch.as_tensor(row)).numpy()
+        np.testing.assert_allclose(torch_jac, net.jacobian(row), rtol=0, atol=1e-12)
         val, jac = f(row)
-        np.testing.assert_allclose(np.array(val).ravel(), net(row), atol=1e-12)
-        np.testing.assert_allclose(np.array(jac), net.jacobian(row), atol=1e-10)
+        np.testing.assert_allclose(np.array(val).ravel(), net(row), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.array(jac), net.jacobian(row), rtol=0, atol=1e-12)
+
+
+def test_trained_twin_exports_the_network_it_evaluates() -> None:
+    """TorchMLP (normalised units, trainable) and the folded network of its exported file content agree."""
+    torch.manual_seed(0)
+    off, scale = box_normalisation()
+    twin = TorchMLP(off, scale, np.array([0.1, 1.0, 0.2]), np.array([0.3, 0.05, 0.4]))
+    arrays = twin.export()
+    assert sorted(arrays) == sorted(network_arrays((0, 0, 0), (0, 0, 0), 0, 0, 0, 0))
+    assert all(a.dtype == np.float32 for a in arrays.values())
+    z = sample_box(40, np.random.default_rng(1))
+    with torch.no_grad():
+        expected = twin(torch.as_tensor(z, dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(network_from_arrays(arrays)(z), expected, rtol=0, atol=1e-5)
+    with pytest.raises(ValueError, match="lack"):
+        network_from_arrays({k: v for k, v in arrays.items() if k != "in_scale"})
 
 
 def test_jacobian_matches_finite_differences(bundle) -> None:  # type: ignore[no-untyped-def]
-    net: MLP = bundle.margin
+    net: DenseNetwork = bundle.margin
     z0 = np.array([1.05, 0.3, 0.15, 0.05])
     h = 1e-7
     fd = np.column_stack([(net(z0 + h * e) - net(z0 - h * e)) / (2 * h) for e in np.eye(4)])
@@ -89,7 +103,8 @@ def test_fit_learns_a_smooth_function() -> None:
     rng = np.random.default_rng(0)
     z = sample_box(4000, rng)
     target = np.column_stack([np.sin(3 * z[:, 1]) + z[:, 0], z[:, 2] * z[:, 3]])
-    net, hist = fit(z, target, np.ones(2), TrainConfig(iters=1500, batch_size=256))
+    arrays, hist = fit(z, target, np.ones(2), TrainConfig(iters=1500, batch_size=256))
+    net = network_from_arrays(arrays)
     assert hist[-1] < 0.1 * hist[0]
     err = net(z) - target
     assert np.mean(err**2) < 0.01 * np.var(target, axis=0).sum()
@@ -120,5 +135,7 @@ def test_train_bundle_end_to_end(tmp_path: Path) -> None:
     assert json.loads((tmp_path / "w" / "card.json").read_text()) == loaded.card
     assert card["dataset"]["n_samples"] == 3000
     off, scale = box_normalisation()
-    np.testing.assert_allclose(loaded.margin.in_offset, off, rtol=1e-6)
-    np.testing.assert_allclose(loaded.margin.in_scale, scale, rtol=1e-6)
+    stored = read_arrays(tmp_path / "w" / "margin.npz")
+    np.testing.assert_allclose(stored["in_offset"], off, rtol=1e-6)
+    np.testing.assert_allclose(stored["in_scale"], scale, rtol=1e-6)
+    np.testing.assert_array_equal(loaded.margin(off), network_from_arrays(stored)(off))

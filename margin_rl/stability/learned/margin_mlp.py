@@ -1,4 +1,9 @@
-"""The margin MLP as a torch module (training and differentiable use); numpy inference is in ``learned``.
+"""The margin MLP as torch modules: :class:`MarginMLP` to train, :class:`MarginModule` to use trained weights.
+
+:class:`MarginModule` (``LearnedMargin.torch_module()``) evaluates the folded weights of
+:class:`~margin_rl.network.DenseNetwork`, the one implementation the numpy inference and the planner's CasADi
+expression use too. :class:`MarginMLP` holds the trainable parameters in normalised units, evaluated by
+:func:`margin_rl.network.torch_forward`; ``to_weights`` saves them as :class:`MarginWeights`.
 
 Two parameterisations of the same 47-256-128-128-1 softsign network:
 
@@ -17,26 +22,26 @@ Two parameterisations of the same 47-256-128-128-1 softsign network:
   coordinates needs a mirror-symmetric normalisation (mean with M mu = mu, equal scales on swapped
   entries), which :func:`~margin_rl.stability.learned.training.build_model` fits on the mirror-augmented
   training split. ``to_weights`` expands the tied parameters into ordinary dense matrices, so saved
-  weights, the numpy inference, the ONNX export and :meth:`from_weights` are the same for both.
+  weights, the numpy inference, the ONNX export and :class:`MarginModule` are the same for both.
 
-The physics-informed model (:class:`PhysicsMarginMLP`, ``architecture="physics"``) is a :class:`MarginMLP` on
-[lambda, physics features] (:mod:`~margin_rl.stability.learned.features`) plus ``proxy_weight`` x the analytic proxy.
-The features of the mirrored state are a signed permutation of the features, so Q above extends to the
-input [lambda, features] (``input_mirror``) and the same tying keeps the whole model exactly invariant.
+The physics-informed model (``architecture="physics"``) is a :class:`MarginMLP` on [lambda, physics features]
+(:mod:`~margin_rl.stability.learned.features`; training feeds it precomputed inputs) plus ``proxy_weight`` x the
+analytic proxy; :class:`MarginModule` computes the features in torch. The features of the mirrored state are a
+signed permutation of the features, so Q above extends to the input [lambda, features] (``input_mirror``) and
+the same tying keeps the whole model exactly invariant.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import math
 
 import numpy as np
 import torch
 from torch import nn
-from torch.nn import functional
 
-from margin_rl.stability.analytic.lambda_state import MIRROR_SIGN, MIRROR_SOURCE
+from margin_rl.network import DenseNetwork, torch_forward
+from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, MIRROR_SIGN, MIRROR_SOURCE
 from margin_rl.stability.learned.features import (
     INPUT_MIRROR_SIGN,
     INPUT_MIRROR_SOURCE,
@@ -46,7 +51,7 @@ from margin_rl.stability.learned.features import (
     input_names,
     physics_features_torch,
 )
-from margin_rl.stability.learned.mlp_weights import ARCHITECTURE, MarginWeights
+from margin_rl.stability.learned.mlp_weights import ACTIVATION, ARCHITECTURE, MarginWeights
 
 
 def _uniform(shape: tuple[int, ...], fan_in: int) -> nn.Parameter:
@@ -91,7 +96,6 @@ class MarginMLP(nn.Module):
         if len(widths) < 2 or widths[0] != len(input_mean) or widths[-1] != 1:
             raise ValueError(f"widths must run from {len(input_mean)} inputs to 1 output, got {widths}")
         self.mirror_tied = bool(mirror_tied)
-        self.activation = nn.Softsign()
         if self.mirror_tied:
             _check_mirror_symmetric(
                 np.asarray(input_mean, float), np.asarray(input_std, float), mirror_source, mirror_sign
@@ -145,42 +149,11 @@ class MarginMLP(nn.Module):
 
     def normalized_forward(self, x: torch.Tensor) -> torch.Tensor:
         """Network output in normalised units (what the training loss sees)."""
-        params = self.dense_parameters()
-        h = x
-        for weight, bias in params[:-1]:
-            h = self.activation(functional.linear(h, weight, bias))
-        weight, bias = params[-1]
-        return functional.linear(h, weight, bias)[..., 0]
+        return torch_forward(x, self.dense_parameters(), ACTIVATION)[..., 0]
 
     def forward(self, lam: torch.Tensor) -> torch.Tensor:
         x = (lam - self.input_mean) / self.input_std
         return self.normalized_forward(x) * self.output_scale[1] + self.output_scale[0]
-
-    @classmethod
-    def from_weights(cls, weights: MarginWeights, dtype: torch.dtype | None = None) -> nn.Module:
-        """Plain module with the given (dense) parameters, in ``dtype`` (float32 by default): a
-        :class:`MarginMLP` for ``"paper"`` weights, a :class:`PhysicsMarginMLP` for ``"physics"``."""
-        if weights.architecture == "physics":
-            return PhysicsMarginMLP.from_weights(weights, dtype)
-        return cls._dense(weights, dtype)
-
-    @classmethod
-    def _dense(cls, weights: MarginWeights, dtype: torch.dtype | None) -> MarginMLP:
-        module = cls(
-            weights.input_mean,
-            weights.input_std,
-            weights.output_mean,
-            weights.output_std,
-            weights.lam_low,
-            weights.lam_high,
-            dtype=dtype or torch.float32,
-            widths=(weights.weights[0].shape[1], *(w.shape[0] for w in weights.weights)),
-        )
-        with torch.no_grad():
-            for layer, w, b in zip(module.layers, weights.weights, weights.biases, strict=True):
-                layer.weight.copy_(torch.as_tensor(w))
-                layer.bias.copy_(torch.as_tensor(b))
-        return module
 
     def to_weights(self) -> MarginWeights:
         """Plain-numpy dense parameters for saving (see
@@ -218,46 +191,36 @@ def _check_mirror_symmetric(
         )
 
 
-class PhysicsMarginMLP(nn.Module):
-    """The physics-informed margin: ``core([lambda, features(lambda)]) + proxy_weight * proxy(lambda)`` [m].
+class MarginModule(nn.Module):
+    """Trained weights as a module: raw lambda (..., 47) -> m_l (...) [m], what ``LearnedMargin.torch_module``
+    returns.
 
-    ``core`` is a :class:`MarginMLP` whose raw input is [lambda, features] (47 + N_FEATURES entries, its
-    normalisation fitted on them); the features are :func:`~margin_rl.stability.learned.features.physics_features_torch`
-    with the robot's constants, so gradients flow to lambda through them. ``forward(lam)``: (..., 47) -> (...).
+    ``network`` (the folded layers, :meth:`MarginWeights.network`) runs as
+    :meth:`~margin_rl.network.DenseNetwork.torch_module` in ``dtype`` (float32 by default). With physics
+    ``constants`` its input is [lambda, :func:`~margin_rl.stability.learned.features.physics_features_torch`]
+    and ``proxy_weight`` x the proxy feature is added; gradients flow to lambda through the features.
     """
 
-    def __init__(self, core: MarginMLP, constants: PhysicsConstants, proxy_weight: float,
-                 lam_low: np.ndarray, lam_high: np.ndarray) -> None:  # fmt: skip
+    def __init__(
+        self,
+        network: DenseNetwork,
+        dtype: torch.dtype | None = None,
+        constants: PhysicsConstants | None = None,
+        proxy_weight: float = 0.0,
+    ) -> None:
         super().__init__()
-        if core.input_mean.shape[0] != PHYSICS_INPUT_DIM:
-            raise ValueError(f"the core needs {PHYSICS_INPUT_DIM} inputs, got {core.input_mean.shape[0]}")
-        self.core = core
+        expected = PHYSICS_INPUT_DIM if constants is not None else LAMBDA_DIM
+        if network.in_dim != expected or network.out_dim != 1:
+            raise ValueError(f"the network maps {network.in_dim} inputs to {network.out_dim}; expected {expected} to 1")
+        self.network = network.torch_module(dtype)
         self.constants = constants
         self.proxy_weight = float(proxy_weight)
-        dtype = core.input_mean.dtype
-        self.register_buffer("lam_low", torch.as_tensor(lam_low, dtype=dtype))
-        self.register_buffer("lam_high", torch.as_tensor(lam_high, dtype=dtype))
 
     def forward(self, lam: torch.Tensor) -> torch.Tensor:
+        if self.constants is None:
+            return self.network(lam)[..., 0]
         features = physics_features_torch(lam, self.constants)
-        out = self.core(torch.cat([lam, features], dim=-1))
+        out = self.network(torch.cat([lam, features], dim=-1))[..., 0]
         if self.proxy_weight != 0.0:
             out = out + self.proxy_weight * features[..., PROXY_INDEX]
         return out
-
-    @classmethod
-    def from_weights(cls, weights: MarginWeights, dtype: torch.dtype | None = None) -> PhysicsMarginMLP:
-        core = MarginMLP._dense(weights, dtype)
-        return cls(core, weights.constants, weights.proxy_weight, weights.lam_low, weights.lam_high)
-
-    def to_weights(self) -> MarginWeights:
-        """Dense parameters of the core with the physics constants, for :func:`save_weights`."""
-        core = self.core.to_weights()
-        return dataclasses.replace(
-            core,
-            lam_low=self.lam_low.detach().cpu().double().numpy(),
-            lam_high=self.lam_high.detach().cpu().double().numpy(),
-            architecture="physics",
-            physics=self.constants.to_array(),
-            proxy_weight=self.proxy_weight,
-        )

@@ -1,13 +1,14 @@
 """The learned margin's network as data: architecture, weights, their files and model cards.
 
 One module for the types both the numpy inference (:mod:`~margin_rl.stability.learned.model`) and the torch
-module (:mod:`~margin_rl.stability.learned.margin_mlp`) use, so that neither imports the other:
+modules (:mod:`~margin_rl.stability.learned.margin_mlp`) use, so that neither imports the other:
 
 * :data:`ARCHITECTURE` (the layer widths of seed 000 §IV-A), :data:`ARCHITECTURES` (``"paper"``: that
   network on raw lambda; ``"physics"``: the same hidden layers on [lambda, the physics features of
   :mod:`~margin_rl.stability.learned.features`], plus ``proxy_weight`` times the analytic proxy) and
   :class:`MarginWeights` (the parameters in plain numpy, validated against the architecture and the lambda
-  layout);
+  layout; :meth:`MarginWeights.network` folds them into the :class:`~margin_rl.network.DenseNetwork` that
+  gives the numpy, torch and CasADi forms);
 * the bundled files: :func:`weights_dir`, :func:`bundled_robots`, :func:`bundled_weights`, :func:`weights_path`
   (``"<robot>"``: the default network, trained on the states walking policies visit and on Table I (learned
   margin v2); ``"<robot>_table_i"``: the network trained on seed 000's Table I alone, the v1 default);
@@ -19,18 +20,17 @@ from __future__ import annotations
 
 import hashlib
 import importlib.resources
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from margin_rl.atomic import atomic_savez, atomic_write_text
-from margin_rl.provenance import sha256_file
+from margin_rl.network import DenseNetwork, layer_arrays, read_layers, save_arrays, write_card
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, LAMBDA_FIELDS, lambda_names
 from margin_rl.stability.learned.features import N_FEATURES, PhysicsConstants, feature_names
 
 __all__ = [
+    "ACTIVATION",
     "ARCHITECTURE",
     "ARCHITECTURES",
     "WEIGHTS_FORMAT",
@@ -47,6 +47,8 @@ __all__ = [
 
 ARCHITECTURE: tuple[int, ...] = (LAMBDA_DIM, 256, 128, 128, 1)
 """Layer widths of seed 000 §IV-A."""
+ACTIVATION = "softsign"
+"""The hidden layers' activation (seed 000 §IV-A), every architecture."""
 
 ARCHITECTURES: tuple[str, ...] = ("paper", "physics")
 """``paper``: :data:`ARCHITECTURE` on raw lambda. ``physics``: the same hidden layers on
@@ -141,6 +143,19 @@ class MarginWeights:
             raise WeightsError(f"{self.architecture} weights carry no physics constants")
         return PhysicsConstants.from_array(self.physics)
 
+    def network(self) -> DenseNetwork:
+        """The layers with the input normalisation folded into the first and the output scaling into the
+        last, once: raw network input (lambda, or [lambda, features]) -> margin [m] before any proxy."""
+        return DenseNetwork.fold(
+            self.weights,
+            self.biases,
+            ACTIVATION,
+            in_offset=self.input_mean,
+            in_scale=self.input_std,
+            out_offset=self.output_mean,
+            out_scale=self.output_std,
+        )
+
     def validate(self, source: str = "weights") -> None:
         expected = architecture_widths(self.architecture)
         widths = [self.weights[0].shape[1]] + [w.shape[0] for w in self.weights]
@@ -169,8 +184,7 @@ class MarginWeights:
             raise WeightsError(f"{source}: non-finite parameters")
 
     def to_arrays(self) -> dict[str, np.ndarray]:
-        out = {f"W{k}": w.astype(np.float32) for k, w in enumerate(self.weights)}
-        out |= {f"b{k}": b.astype(np.float32) for k, b in enumerate(self.biases)}
+        out: dict[str, np.ndarray] = layer_arrays(self.weights, self.biases)
         out |= {
             "input_mean": self.input_mean.astype(np.float64),
             "input_std": self.input_std.astype(np.float64),
@@ -197,9 +211,10 @@ class MarginWeights:
         missing = [k for k in required if k not in arrays]
         if missing:
             raise WeightsError(f"{source}: missing arrays {missing}")
+        weights, biases = read_layers(arrays, n_layers)
         w = cls(
-            weights=tuple(np.asarray(arrays[f"W{i}"], dtype=np.float64) for i in range(n_layers)),
-            biases=tuple(np.asarray(arrays[f"b{i}"], dtype=np.float64) for i in range(n_layers)),
+            weights=weights,
+            biases=biases,
             input_mean=np.asarray(arrays["input_mean"], dtype=np.float64),
             input_std=np.asarray(arrays["input_std"], dtype=np.float64),
             output_mean=float(arrays["output_scale"][0]),
@@ -219,7 +234,7 @@ def save_weights(weights: MarginWeights, path: str | Path, card: dict[str, objec
     path = Path(path).with_suffix("")
     weights.validate(str(path))
     npz = path.with_suffix(".npz")
-    atomic_savez(npz, **weights.to_arrays())
+    digest = save_arrays(npz, weights.to_arrays())
     physics = {}
     if weights.architecture != "paper":
         constants = weights.constants
@@ -233,13 +248,13 @@ def save_weights(weights: MarginWeights, path: str | Path, card: dict[str, objec
     full_card = {
         "format": WEIGHTS_FORMAT,
         "architecture": list(architecture_widths(weights.architecture)),
-        "activation": "softsign",
+        "activation": ACTIVATION,
         "lambda_layout": layout_signature(),
         "lambda_names": list(lambda_names()),
         **physics,
         **card,
         "file": npz.name,
-        "sha256": sha256_file(npz),
+        "sha256": digest,
     }
-    atomic_write_text(path.with_suffix(".json"), json.dumps(full_card, indent=2) + "\n")
+    write_card(path.with_suffix(".json"), full_card)
     return full_card

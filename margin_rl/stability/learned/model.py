@@ -16,6 +16,9 @@ name`` imports), where users import them.
 * ``model.grad(lam)``: dm/dlambda by exact backpropagation in numpy, (47,) or (N, 47);
 * ``model.value_and_grad(lam)``: both in one pass;
 * ``model.torch_module()``: the same network as a ``torch.nn.Module`` for differentiable use;
+* ``model.network``: the layers with the normalisation folded in (:class:`~margin_rl.network.DenseNetwork`), the
+  one implementation behind the numpy value and gradient, the torch module and the planner's CasADi expression
+  (:func:`margin_rl.planning.mlp.margin_function`);
 * ``model.export_onnx(path)``: ONNX for C++ users;
 * ``model.out_of_distribution(lam)``: True where lambda leaves the per-field ranges seen in training
   (``model.outside_ranges(lam)``: which entries).
@@ -33,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from margin_rl.provenance import sha256_file
+from margin_rl.network import read_arrays, verify_sha256
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, LAMBDA_FIELDS, check_lambda
 from margin_rl.stability.learned.features import PROXY_INDEX, physics_features, physics_features_and_jacobian
 from margin_rl.stability.learned.mlp_weights import ARCHITECTURE as ARCHITECTURE
@@ -51,10 +54,6 @@ from margin_rl.stability.learned.mlp_weights import weights_dir as weights_dir
 _CONTACTS = slice(sum(f.size for f in LAMBDA_FIELDS[:8]), sum(f.size for f in LAMBDA_FIELDS[:9]))
 
 
-def _softsign(z: np.ndarray) -> np.ndarray:
-    return z / (1.0 + np.abs(z))
-
-
 class LearnedMargin:
     """The learned stability margin of one robot (see the module docstring)."""
 
@@ -65,18 +64,9 @@ class LearnedMargin:
         self.name = name
         self.architecture = weights.architecture
         self._constants = weights.constants if weights.architecture == "physics" else None
-        # Fold the input normalisation into the first layer and the output scaling into the last:
-        # one matmul chain at inference, in float64 for the single-state path and float32 in batches.
-        W = [w.copy() for w in weights.weights]
-        b = [x.copy() for x in weights.biases]
-        W[0] = weights.weights[0] / weights.input_std[None, :]
-        b[0] = weights.biases[0] - W[0] @ weights.input_mean
-        W[-1] = weights.weights[-1] * weights.output_std
-        b[-1] = weights.biases[-1] * weights.output_std + weights.output_mean
-        self._W64 = [np.ascontiguousarray(w) for w in W]
-        self._b64 = b
-        self._W32T = [np.ascontiguousarray(w.T.astype(np.float32)) for w in W]
-        self._b32 = [x.astype(np.float32) for x in b]
+        # The normalisation folded into the layers, once: float64 for single states and gradients, float32
+        # for batched values; the torch and CasADi forms come from the same folded weights.
+        self.network = weights.network()
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -97,117 +87,64 @@ class LearnedMargin:
             card = json.loads(card_path.read_text())
         except json.JSONDecodeError as exc:
             raise WeightsError(f"{card_path}: malformed model card ({exc})") from exc
-        digest = sha256_file(npz)
-        if card.get("sha256") != digest:
-            raise WeightsError(
-                f"{npz}: checksum mismatch (card {card.get('sha256')!r}, file {digest!r}): "
-                "the file is corrupted or does not belong to this card"
-            )
+        verify_sha256(npz, card.get("sha256"), WeightsError)
         if card.get("format") != WEIGHTS_FORMAT:
             raise WeightsError(f"{npz}: weights format {card.get('format')!r}, this package reads {WEIGHTS_FORMAT}")
         if card.get("lambda_layout") != layout_signature():
             raise WeightsError(f"{npz}: trained for another lambda layout ({card.get('lambda_layout')!r})")
         try:
-            with np.load(npz, allow_pickle=False) as data:
-                arrays = {k: data[k] for k in data.files}
+            arrays = read_arrays(npz)
         except (ValueError, OSError) as exc:
             raise WeightsError(f"{npz}: unreadable weights ({exc})") from exc
         return cls(MarginWeights.from_arrays(arrays, str(npz)), card, name=str(card.get("robot", npz.stem)))
 
     # ------------------------------------------------------------------ inference (numpy)
-    def __call__(self, lam: np.ndarray) -> float | np.ndarray:
-        """m_l [m] of one lambda (47,) -> float, or of a batch (N, 47) -> (N,)."""
-        x = check_lambda(lam)
-        if self._constants is not None:
-            return self._physics_value(x)
-        if x.ndim == 1:
-            h = x
-            for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
-                h = _softsign(W @ h + b)
-            return float((self._W64[-1] @ h + self._b64[-1])[0])
-        if x.ndim != 2:
+    def _network_input(
+        self, x: np.ndarray, jacobian: bool = False
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """(network input, proxy term, d features / d lambda): lambda itself for the paper architecture; for
+        physics weights the batch [lambda, features] (N, 47 + N_FEATURES), proxy_weight x proxy (N,) and, with
+        ``jacobian``, the features' Jacobian (N, N_FEATURES, 47)."""
+        if x.ndim not in (1, 2):
             raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
-        h = x.astype(np.float32)
-        for WT, b in zip(self._W32T[:-1], self._b32[:-1], strict=True):
-            h = h @ WT
-            h += b
-            # softsign in place: h / (1 + |h|) without temporaries of the batch size.
-            denominator = np.abs(h)
-            denominator += 1.0
-            h /= denominator
-        return (h @ self._W32T[-1] + self._b32[-1])[:, 0].astype(np.float64)
+        if self._constants is None:
+            return x, None, None
+        batch = x if x.ndim == 2 else x[None, :]
+        if jacobian:
+            features, d_features = physics_features_and_jacobian(batch, self._constants)
+        else:
+            features, d_features = physics_features(batch, self._constants), None
+        proxy = self.params.proxy_weight * features[:, PROXY_INDEX]
+        return np.concatenate([batch, features], axis=1), proxy, d_features
+
+    def __call__(self, lam: np.ndarray) -> float | np.ndarray:
+        """m_l [m] of one lambda (47,) -> float (float64), or of a batch (N, 47) -> (N,) (float32 layers)."""
+        x = check_lambda(lam)
+        z, proxy, _ = self._network_input(x)
+        if x.ndim == 1:
+            if proxy is None:
+                return float(self.network(z)[0])
+            return float(self.network(z[0])[0] + proxy[0])
+        value = self.network.value_float32(z)[:, 0].astype(np.float64)
+        return value if proxy is None else value + proxy
 
     def value_and_grad(self, lam: np.ndarray) -> tuple[float | np.ndarray, np.ndarray]:
-        """(m_l, dm_l/dlambda) by exact backpropagation: (47,) -> (float, (47,)), (N, 47) -> ((N,), (N, 47))."""
+        """(m_l, dm_l/dlambda) by exact backpropagation: (47,) -> (float, (47,)), (N, 47) -> ((N,), (N, 47)).
+
+        Physics weights chain the features' exact Jacobian: dm/dlam = dm/dz_lam + dm/dz_f J_f + proxy_weight
+        J_proxy.
+        """
         x = check_lambda(lam)
-        if self._constants is not None:
-            return self._physics_value_and_grad(x)
-        if x.ndim == 1:
-            return self._value_and_grad_one(x)
-        h = x
-        if h.ndim != 2:
-            raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
-        return self._mlp_value_and_grad(h)
-
-    def _mlp_value_and_grad(self, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The network on a batch of (raw) inputs (N, in) and d output / d input (N, in), float64."""
-        derivatives = []
-        for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
-            z = h @ W.T + b
-            a = 1.0 + np.abs(z)
-            derivatives.append(1.0 / (a * a))  # softsign'(z)
-            h = z / a
-        value = (h @ self._W64[-1].T + self._b64[-1])[:, 0]
-        g = np.broadcast_to(self._W64[-1], (h.shape[0], self._W64[-1].shape[1]))
-        for W, d in zip(reversed(self._W64[:-1]), reversed(derivatives), strict=True):
-            g = (g * d) @ W
-        return value, g
-
-    def _value_and_grad_one(self, x: np.ndarray) -> tuple[float, np.ndarray]:
-        """Matrix-vector version for one lambda (no batch broadcasting: tens of microseconds)."""
-        h = x
-        derivatives = []
-        for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
-            z = W @ h + b
-            a = 1.0 + np.abs(z)
-            h = z / a
-            derivatives.append(1.0 / (a * a))
-        w_last = self._W64[-1][0]
-        g = w_last
-        for W, d in zip(reversed(self._W64[:-1]), reversed(derivatives), strict=True):
-            g = (g * d) @ W
-        return float(w_last @ h + self._b64[-1][0]), g
-
-    # ------------------------------------------------------------------ the physics architecture
-    def _physics_value(self, x: np.ndarray) -> float | np.ndarray:
-        """[lambda, features] through the layers (float64 for one lambda, float32 in batches) + the proxy."""
-        if x.ndim not in (1, 2):
-            raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
-        batch = x if x.ndim == 2 else x[None, :]
-        features = physics_features(batch, self._constants)
-        z = np.concatenate([batch, features], axis=1)
-        proxy = self.params.proxy_weight * features[:, PROXY_INDEX]
-        if x.ndim == 1:
-            h = z[0]
-            for W, b in zip(self._W64[:-1], self._b64[:-1], strict=True):
-                h = _softsign(W @ h + b)
-            return float((self._W64[-1] @ h + self._b64[-1])[0] + proxy[0])
-        h = z.astype(np.float32)
-        for WT, b in zip(self._W32T[:-1], self._b32[:-1], strict=True):
-            h = _softsign(h @ WT + b)
-        return (h @ self._W32T[-1] + self._b32[-1])[:, 0].astype(np.float64) + proxy
-
-    def _physics_value_and_grad(self, x: np.ndarray) -> tuple[float | np.ndarray, np.ndarray]:
-        """Chain rule through the features: dm/dlam = dm/dz_lam + dm/dz_f J_f + proxy_weight J_proxy."""
-        if x.ndim not in (1, 2):
-            raise ValueError(f"lam must have shape (47,) or (N, 47), got {x.shape}")
-        batch = x if x.ndim == 2 else x[None, :]
-        features, jacobian = physics_features_and_jacobian(batch, self._constants)
-        value, g = self._mlp_value_and_grad(np.concatenate([batch, features], axis=1))
-        w = self.params.proxy_weight
-        value = value + w * features[:, PROXY_INDEX]
-        grad = g[:, :LAMBDA_DIM] + np.einsum("nf,nfj->nj", g[:, LAMBDA_DIM:], jacobian)
-        grad += w * jacobian[:, PROXY_INDEX]
+        z, proxy, d_features = self._network_input(x, jacobian=True)
+        value, jacobian = self.network.value_and_grad(z)
+        if proxy is None:
+            if x.ndim == 1:
+                return float(value[0]), jacobian[0]
+            return value[:, 0], jacobian[:, 0]
+        g = jacobian[:, 0]
+        value = value[:, 0] + proxy
+        grad = g[:, :LAMBDA_DIM] + np.einsum("nf,nfj->nj", g[:, LAMBDA_DIM:], d_features)
+        grad += self.params.proxy_weight * d_features[:, PROXY_INDEX]
         if x.ndim == 1:
             return float(value[0]), grad[0]
         return value, grad
@@ -237,12 +174,13 @@ class LearnedMargin:
 
     # ------------------------------------------------------------------ torch and ONNX
     def torch_module(self, dtype: object = None):
-        """The network as a ``torch.nn.Module`` mapping raw lambda (..., 47) to m_l (...) [m]
-        (:class:`~margin_rl.stability.learned.margin_mlp.MarginMLP`, or ``PhysicsMarginMLP`` for physics weights)."""
+        """The network as a ``torch.nn.Module`` mapping raw lambda (..., 47) to m_l (...) [m], in ``dtype``
+        (float32 by default): :class:`~margin_rl.stability.learned.margin_mlp.MarginModule` on the folded
+        weights of :attr:`network` (with the physics features and proxy for physics weights)."""
         # Lazy: torch is heavy, and the numpy paths (environments, dataset workers) never need it.
-        from margin_rl.stability.learned.margin_mlp import MarginMLP
+        from margin_rl.stability.learned.margin_mlp import MarginModule
 
-        return MarginMLP.from_weights(self.params, dtype=dtype)
+        return MarginModule(self.network, dtype, self._constants, self.params.proxy_weight)
 
     def export_onnx(self, path: str | Path) -> Path:
         """Export the network (raw lambda (N, 47) -> m_l (N,)) to ONNX, opset 17."""

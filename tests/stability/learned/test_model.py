@@ -109,10 +109,15 @@ def test_save_load_round_trip_and_card(saved: Path, model: LearnedMargin) -> Non
     card = json.loads(saved.with_suffix(".json").read_text())
     assert card["architecture"] == list(ARCHITECTURE) and card["activation"] == "softsign"
     assert len(card["lambda_names"]) == 47 and card["robot"] == "toy"
-    module = MarginMLP.from_weights(model.params)
-    again = LearnedMargin(module.to_weights())
+    w = model.params
+    torch.manual_seed(0)
+    module = MarginMLP(w.input_mean, w.input_std, w.output_mean, w.output_std, w.lam_low, w.lam_high)
+    path = save_weights(module.to_weights(), saved.parent / "trained", {"robot": "toy"})["file"]
+    again = LearnedMargin.load(saved.parent / path)
     lam = np.random.default_rng(3).normal(size=47)
-    assert again(lam) == pytest.approx(model(lam), abs=1e-6)
+    with torch.no_grad():
+        expected = float(module(torch.as_tensor(lam, dtype=torch.float32)))
+    assert again(lam) == pytest.approx(expected, abs=1e-5)  # the float32 module vs float64 numpy
 
 
 def test_bad_inputs(model: LearnedMargin) -> None:
@@ -183,6 +188,31 @@ def test_bundled_weights_load_and_track_the_analytic_margin(robot: str) -> None:
     err = np.asarray(model(lams))[ok] - analytic[ok]
     # Loose bound: the card's test RMSE is the real figure; this guards against wrong weights.
     assert np.sqrt(np.mean(err**2)) < 3 * model.card["test_metrics"]["rmse_cm"] / 100 + 0.01
+
+
+@pytest.mark.parametrize("name", ["anymal_b", "anymal_c", "anymal_c_table_i"])
+def test_bundled_torch_form_matches_numpy_and_finite_differences(name: str) -> None:
+    """One set of folded weights: the torch form (float64) gives the numpy value and gradient to 1e-12, and its
+    autograd gradient is the derivative of its own forward pass (central differences)."""
+    from margin_rl import load_robot
+    from margin_rl.stability.analytic.sampling import sample_states
+
+    model = LearnedMargin.load(name)
+    lams = sample_states(load_robot(name.removesuffix("_table_i")), 16, seed=7)
+    value, grad = model.value_and_grad(lams)
+    module = model.torch_module(torch.float64)
+    x = torch.tensor(lams, requires_grad=True)
+    out = module(x)
+    out.sum().backward()
+    np.testing.assert_allclose(out.detach().numpy(), value, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(x.grad.numpy(), grad, rtol=0, atol=1e-12)
+    h = 1e-6
+    with torch.no_grad():
+        for j in range(0, 47, 3):
+            e = torch.zeros(47, dtype=torch.float64)
+            e[j] = h
+            fd = (module(x + e) - module(x - e)) / (2 * h)
+            np.testing.assert_allclose(fd.numpy(), x.grad[:, j].numpy(), rtol=0, atol=1e-7)
 
 
 def test_training_end_to_end_writes_a_complete_card(tmp_path: Path) -> None:
@@ -427,11 +457,10 @@ def test_physics_weights_validation() -> None:
 
 
 def test_tied_physics_model_is_exactly_mirror_invariant() -> None:
-    """Tied weights on [lambda, features]: m(mirror(lam)) = m(lam) in torch (float64, through the features),
-    in the saved dense numpy weights, and the gradient transforms like lambda."""
+    """Tied weights on [lambda, features]: m(mirror(lam)) = m(lam) in the torch module of the saved dense
+    weights (float64, through the features), in numpy, and the gradient transforms like lambda."""
     from margin_rl.stability.analytic.lambda_state import MIRROR_SIGN, MIRROR_SOURCE, mirror_lambda
     from margin_rl.stability.learned.features import PhysicsConstants
-    from margin_rl.stability.learned.margin_mlp import PhysicsMarginMLP
     from margin_rl.stability.learned.training import TrainConfig, build_model, model_inputs, to_margin_weights
 
     constants = PhysicsConstants(50.0, 9.81, 0.03)
@@ -443,12 +472,12 @@ def test_tied_physics_model_is_exactly_mirror_invariant() -> None:
         inputs.inputs, np.random.default_rng(0).normal(size=300), "tied", (inputs.inputs.shape[1], 256, 128, 128, 1)
     )
     weights = to_margin_weights(core, config, constants)
-    module = PhysicsMarginMLP(core.double(), constants, 1.0, weights.lam_low, weights.lam_high)
+    dense = LearnedMargin(weights)
+    module = dense.torch_module(torch.float64)  # the features in torch, then the folded layers
     x, xm = torch.as_tensor(lam[:40]), torch.as_tensor(mirror_lambda(lam[:40]))
     out = module(x)
     assert float(out.std()) > 0
     torch.testing.assert_close(out, module(xm), rtol=0, atol=1e-12)
-    dense = LearnedMargin(weights)
     np.testing.assert_allclose(dense(lam[:40]), dense(mirror_lambda(lam[:40])), rtol=0, atol=2e-6)
     np.testing.assert_allclose(dense(lam[:40]), out.detach().numpy(), rtol=0, atol=2e-6)
     grad, grad_mirrored = dense.grad(lam[:40]), dense.grad(mirror_lambda(lam[:40]))

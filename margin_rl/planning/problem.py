@@ -14,7 +14,7 @@ Constraints:
 * minimum stability margin: m(lambda(t_k)) >= m_min + backoff at every node, with m the learned margin
   network (or, for the benchmark, the analytic margin with finite differences; or none, the contrast);
   ``backoff`` (default 2 cm) tightens the bound by the network's typical over-estimate near the
-  3-contact support edges, measured against the analytic margin (see README), so that the plan's
+  3-contact support edges, measured against the analytic margin (see docs/planning.md), so that the plan's
   *analytic* margin stays above m_min - 1 cm;
 * range of motion: every foot-sphere centre inside a box of half-extents ``rom_half_extents``
   around its nominal position in the base frame, at every node (for a swing foot the box's top is

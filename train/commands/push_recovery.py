@@ -1,4 +1,4 @@
-"""``push_recovery``: how well policies survive pushes of increasing impulse, per variant (issue 17, item 3).
+"""``push_recovery``: how well policies survive pushes of increasing impulse, per variant.
 
 Example (the shipped bundles, or any policies)::
 

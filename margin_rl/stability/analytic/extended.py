@@ -33,7 +33,7 @@ feasible set, which still makes m_x a valid lower bound on how much of the load 
 state approaches the edge of feasibility from the "ok" side its region shrinks to a point and m_a tends
 to minus the ICP's distance to that point; from the "infeasible" side alpha* tends to 1 and the
 relaxed region tends to the same point, so m_x has no jump at the status change (measured in
-``benchmarks/bench_extended_margin.py``).
+``benchmarks/studies/bench_extended_margin.py``).
 
 **Support fallback.** When even the static stance is infeasible (e.g. one stance foot), the CoM is not
 above the stance feet, or no foot is in contact, no region exists at any alpha. Then S is the stance

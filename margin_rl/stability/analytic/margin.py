@@ -100,7 +100,7 @@ class AnalyticSettings:
     com_iterations: int = 10  # fixed-point iterations for the CoM offset
     com_tol: float = 3e-5  # [m], residual of the CoM fixed point (joint-angle error ~3e-5 rad)
     # How analytic_margin_batch (and so the dataset) labels many states: "batched" (contact problems
-    # over the batch, one solver per program structure: learned margin v2, item 6) or "per_state"
+    # over the batch, one solver per program structure: the labels of learned margin v2) or "per_state"
     # (analytic_margin on each state, the path before it). Same margins to within focus_tol; the
     # single-state analytic_margin is the same either way.
     labelling: str = "batched"

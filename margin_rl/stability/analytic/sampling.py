@@ -102,16 +102,17 @@ LOCOMOTION = TableI(
     ext_force_std=75.0,
     contact_patterns="any_support",
 )
-"""Table I widened to the states walking policies visit (learned margin v2, item 3).
+"""Table I widened to the states walking policies visit.
 
 The ranges cover the 0.5-99.5 percentiles of lambda measured over rollouts of walking policies of ANYmal B
 (the bundled policies, both variants) and C (two 5M-step policies, with and without the margin term), on flat
 and rough ground, over the command range, with pushes and friction randomisation
-(``benchmarks/bench_locomotion_distribution.py``, ``docs/learned_margin/locomotion_distribution_anymal_{b,c}.json``):
-base tilts up to 41 deg, CoM accelerations of -10..+17 m/s^2 vertically, base angular accelerations of
-+-235 rad/s^2 about x, friction up to 1.0 (the environments' default), feet crossed or spread by up to
-0.63 m, pushes of 150 N, and every set of feet in contact. The finite-difference accelerations of the
-environments are what makes the angular ranges this wide (``benchmarks/bench_acceleration_estimates.py``).
+(``benchmarks/studies/bench_locomotion_distribution.py``,
+``docs/learned_margin/locomotion_distribution_anymal_{b,c}.json``): base tilts up to 41 deg, CoM
+accelerations of -10..+17 m/s^2 vertically, base angular accelerations of +-235 rad/s^2 about x, friction up
+to 1.0 (the environments' default), feet crossed or spread by up to 0.63 m, pushes of 150 N, and every set of
+feet in contact. The finite-difference accelerations of the environments are what makes the angular ranges
+this wide (``benchmarks/studies/bench_acceleration_estimates.py``).
 
 The ranges are right, the density is not (measured, BENCHMARKS.md): independent uniform draws over them are
 infeasible 97-98 % of the time on ANYmal B and C (Table I: 42 % on B), because extreme accelerations together
@@ -263,7 +264,7 @@ def _draw(robot: Robot, n: int, rng: np.random.Generator, t: TableI) -> np.ndarr
 
 @dataclass(frozen=True)
 class RolloutJitter:
-    """How :func:`sample_around_states` perturbs recorded states (learned margin v2, item 3).
+    """How :func:`sample_around_states` perturbs recorded states.
 
     Each continuous lambda entry gets Gaussian noise of ``noise_fraction`` times that entry's standard
     deviation over the recorded states (so the perturbation follows each field's own scale: newtons for the

@@ -144,7 +144,7 @@ Such a wrench is reported as ``"coupled"``.
 
 Cost
 ----
-Measured with ``benchmarks/bench_fwp.py`` on ANYmal C, static non-coplanar stances, a loaded 2-core
+Measured with ``benchmarks/speed/bench_fwp.py`` on ANYmal C, static non-coplanar stances, a loaded 2-core
 AMD EPYC: :func:`fwp_feasibility` (default, no pruning) takes ~5 ms for 3 contacts and ~9 ms for 4
 (the feasible-region margin of the same state: ~1.5 ms). The paper's pipeline (``prune=True``)
 takes ~13 ms for 3 contacts (~600-800 FWP vertices) and ~0.2 s for 4 (~3900-4500 vertices: ~0.1 s

@@ -103,7 +103,7 @@ class DatasetSpec:
         if (self.distribution == "rollouts") != (self.states is not None):
             raise DatasetError(
                 "distribution 'rollouts' needs --states FILE.npz (recorded lambdas, e.g. from "
-                "benchmarks/bench_locomotion_distribution.py --states), and only it takes one"
+                "benchmarks/studies/bench_locomotion_distribution.py --states), and only it takes one"
             )
 
     @property

@@ -66,7 +66,7 @@ class MarginMLP(nn.Module):
     ``forward(lam)``: (..., 47) -> (...) margin [m]. Gradients flow to lambda (for optimisation) and to
     the parameters (for training); the normalisation buffers are fixed. ``mirror_tied=True`` ties the
     weights so that the network is exactly mirror-invariant (module docstring). ``widths`` other than the
-    paper's are for capacity experiments (``benchmarks/bench_margin_capacity.py``): such a network trains
+    paper's are for capacity experiments (``benchmarks/studies/bench_margin_capacity.py``): such a network trains
     and evaluates here, but its weights are refused by :class:`~margin_rl.stability.learned.mlp_weights.MarginWeights`.
 
     Raises:

@@ -8,7 +8,8 @@ the conic programs (LPs) per call and the median time per program.
 
 Usage::
 
-    python benchmarks/bench_feasible_region.py [--cases 30] [--repeats 3] [--tol T] [--rebuild]
+    python benchmarks/speed/bench_feasible_region.py [--cases 30] [--repeats 3] [--tol T] [--max-lps N] [--rebuild]
+        [--json PATH]
 
 ``--rebuild`` adds rows where a new Clarabel solver is built for every direction instead of
 updating only the cost vector of one solver (the default strategy), to show what the update
@@ -17,22 +18,20 @@ saves.  Timings are wall-clock on whatever else the machine is running: run it o
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks.harness, tests
+
 import clarabel
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from margin_rl.stability.geometry import region as fr  # noqa: E402
-from tests.stability import cases  # noqa: E402
+from benchmarks.harness import machine_line, markdown_header, markdown_row, parser, write_record
+from margin_rl.stability.geometry import region as fr
+from margin_rl.stability.geometry.region_program import FAST_SETTINGS, zero_cost
+from tests.stability import cases
 
 STANCES: dict[int, list[tuple[bool, bool, bool, bool]]] = {
     4: [(True, True, True, True)],
@@ -42,14 +41,14 @@ STANCES: dict[int, list[tuple[bool, bool, bool, bool]]] = {
 FRICTIONS: list[Any] = ["cone", ("pyramid", 8)]
 
 
-class _RebuildOracle(fr._SupportOracle):
+class _RebuildOracle(fr.SupportOracle):
     """Builds a fresh solver for every direction (the alternative to ``solver.update(q=...)``)."""
 
     def __call__(self, ax: float, ay: float) -> tuple[int, float, float]:
         prob = self._prob
         q = np.zeros(prob.n_var)
         q[0], q[1] = -ax, -ay
-        solver = clarabel.DefaultSolver(fr._zero_p(prob.n_var), q, prob.A, prob.b, prob.cones, fr._FAST_SETTINGS)
+        solver = clarabel.DefaultSolver(zero_cost(prob.n_var), q, prob.A, prob.b, prob.cones, FAST_SETTINGS)
         return self._solve(solver, ax, ay)
 
 
@@ -83,7 +82,7 @@ def run(kws: list[dict[str, Any]], friction: Any, repeats: int, tol: float, max_
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = parser(__doc__)
     ap.add_argument("--cases", type=int, default=30, help="random states per contact count")
     ap.add_argument("--repeats", type=int, default=3, help="calls per state")
     ap.add_argument("--tol", type=float, default=fr.DEFAULT_TOL, help="area tolerance [m^2]")
@@ -96,34 +95,36 @@ def main(argv: list[str] | None = None) -> None:
     warm = make_cases(4, 2, 999)
     run(warm, "cone", 2, args.tol, args.max_lps)
 
-    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
-    print(
-        f"python {platform.python_version()}, numpy {np.__version__}, clarabel {clarabel.__version__}, "
-        f"{os.cpu_count()} CPUs, load average {load[0]:.2f}; tol={args.tol:g} m^2, max_lps={args.max_lps}, "
-        f"{args.cases} states x {args.repeats} calls per row\n"
-    )
+    print(machine_line())
+    print(f"tol={args.tol:g} m^2, max_lps={args.max_lps}, {args.cases} states x {args.repeats} calls per row\n")
     header = ["contacts", "friction", "strategy", "median ms/call", "p90 ms/call"]
     header += ["LPs/call (mean / max)", "median us/LP (call / LPs)", "empty"]
-    print("| " + " | ".join(header) + " |")
-    print("|---|---|---|---|---|---|---|---|")
-    strategies = [("update q", fr._SupportOracle)]
+    print("\n".join(markdown_header(header)))
+    record = []
+    strategies = [("update q", fr.SupportOracle)]
     if args.rebuild:
         strategies.append(("rebuild", _RebuildOracle))
     for n_contacts in (4, 3, 2):
         kws = make_cases(n_contacts, args.cases, args.seed)
         for friction in FRICTIONS:
             for label, oracle in strategies:
-                original = fr._SupportOracle
-                fr._SupportOracle = oracle  # type: ignore[misc]  # looked up at call time
+                original = fr.SupportOracle
+                fr.SupportOracle = oracle  # type: ignore[misc]  # looked up at call time
                 try:
                     r = run(kws, friction, args.repeats, args.tol, args.max_lps)
                 finally:
-                    fr._SupportOracle = original  # type: ignore[misc]
+                    fr.SupportOracle = original  # type: ignore[misc]
                 name = friction if isinstance(friction, str) else f"pyramid-{friction[1]}"
                 print(
-                    f"| {n_contacts} | {name} | {label} | {r['median_ms']:.2f} | {r['p90_ms']:.2f} | "
-                    f"{r['mean_lps']:.1f} / {r['max_lps']:.0f} | {r['us_per_lp']:.0f} | {r['empty_pct']:.0f} % |"
-                )
+                    markdown_row(
+                        (n_contacts, name, label, f"{r['median_ms']:.2f}", f"{r['p90_ms']:.2f}",
+                         f"{r['mean_lps']:.1f} / {r['max_lps']:.0f}", f"{r['us_per_lp']:.0f}",
+                         f"{r['empty_pct']:.0f} %")
+                    ),
+                    flush=True,
+                )  # fmt: skip
+                record.append({"contacts": n_contacts, "friction": name, "strategy": label, **r})
+    write_record(args.json, "feasible_region", args, record)
 
 
 if __name__ == "__main__":

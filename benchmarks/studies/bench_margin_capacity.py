@@ -1,9 +1,9 @@
 """Experiment: is the paper-size network what limits the learned margin's error? Widths side by side.
 
 Usage:
-    python benchmarks/bench_margin_capacity.py --data data/anymal_c --max-samples 600000 --epochs 20 \\
+    python benchmarks/studies/bench_margin_capacity.py --data data/anymal_c --max-samples 600000 --epochs 20 \\
         --widths 256,128,128 --widths 512,256,256 --widths 1024,512,512
-    python benchmarks/bench_margin_capacity.py --data data/anymal_c --train-subset 20000 --epochs 400 \\
+    python benchmarks/studies/bench_margin_capacity.py --data data/anymal_c --train-subset 20000 --epochs 400 \\
         --schedule cosine --widths 256,128,128    # can the paper network fit (memorise) a small training set?
 
 Every ``--widths`` (hidden layers) trains a fresh softsign MLP with the bundled recipe (Adam, batch 256,

@@ -1,11 +1,11 @@
-"""Experiment: the extended margin m_x on the states walking policies visit (learned margin v2, item 4).
+"""Experiment: the extended margin m_x on the states walking policies visit.
 
 Usage:
-    python benchmarks/bench_extended_margin.py --robot anymal_b --states data/rollouts_b_test.npz --envs 8 \
+    python benchmarks/studies/bench_extended_margin.py --robot anymal_b --states data/rollouts_b_test.npz --envs 8 \
         [--steps 250] [--limit 4000] [--workers 2] [--json docs/learned_margin/extended_margin_anymal_b.json]
 
-``--states`` is a recording of ``benchmarks/bench_locomotion_distribution.py --states`` (or a split of it by
-``bench_margin_rollout_holdout.py``): blocks of ``--steps`` policy steps x ``--envs`` environments, step-major,
+``--states`` is a recording of ``benchmarks/studies/bench_locomotion_distribution.py --states`` (or a split of it
+by ``bench_margin_rollout_holdout.py``): blocks of ``--steps`` policy steps x ``--envs`` environments, step-major,
 so state ``i`` and ``i + envs`` are one environment 20 ms apart. Measured, per robot:
 
 1. where m_x comes from (m_a, the relaxed load, the support fallback) on the visited states;

@@ -1,7 +1,8 @@
 """Benchmark: environment steps per second of the native batched vector env against raw ``mujoco.batch``.
 
 Usage:
-    python benchmarks/bench_env.py [--env margin_rl/AnymalB-v0] [--num-envs 64] [--steps 300] [--rounds 5]
+    python benchmarks/speed/bench_env.py [--env margin_rl/AnymalB-v1] [--num-envs 64] [--steps 300] [--rounds 5]
+        [--json PATH]
 
 Five configurations, measured in interleaved rounds in one run (round r measures all of them, one after the
 other), with the median over rounds and the ratios of medians printed as a Markdown table:
@@ -18,10 +19,12 @@ rewards, observations, resets) is the difference.
 
 from __future__ import annotations
 
-import argparse
-import statistics
+import sys
 import time
 from collections.abc import Callable
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks.harness
 
 import gymnasium as gym
 import mujoco
@@ -29,15 +32,16 @@ import numpy as np
 from mujoco import batch
 
 import margin_rl  # noqa: F401  (registers the ids)
+from benchmarks.harness import interleave, machine_line, parser, print_table, summarise, write_record
 
 
-def env_runner(env_id: str, num_envs: int, actions: np.ndarray, **kwargs: object) -> Callable[[], float]:
+def env_runner(env_id: str, num_envs: int, actions: np.ndarray, **kwargs: object) -> Callable[[int], float]:
     env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
     env.reset(seed=0)
     for a in actions[:20]:  # warm-up
         env.step(a)
 
-    def run() -> float:
+    def run(_round: int) -> float:
         t0 = time.perf_counter()
         for a in actions:
             env.step(a)
@@ -46,7 +50,9 @@ def env_runner(env_id: str, num_envs: int, actions: np.ndarray, **kwargs: object
     return run
 
 
-def raw_runner(env_id: str, num_envs: int, actions: np.ndarray | None, stage: mujoco.mjtStage) -> Callable[[], float]:
+def raw_runner(
+    env_id: str, num_envs: int, actions: np.ndarray | None, stage: mujoco.mjtStage
+) -> Callable[[int], float]:
     env = gym.make_vec(env_id, num_envs=1, vectorization_mode="vector_entry_point", margin="none")
     core = env.unwrapped.core if hasattr(env, "unwrapped") else env.core
     model, decimation, scale = core.model, core.config.decimation, core.config.action_scale
@@ -55,7 +61,7 @@ def raw_runner(env_id: str, num_envs: int, actions: np.ndarray | None, stage: mu
     ctrl = b.bind("ctrl")
     steps = 300 if actions is None else len(actions)
 
-    def run() -> float:
+    def run(_round: int) -> float:
         b.reset(keyframe=key)
         t0 = time.perf_counter()
         for i in range(steps):
@@ -68,13 +74,13 @@ def raw_runner(env_id: str, num_envs: int, actions: np.ndarray | None, stage: mu
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env", default="margin_rl/AnymalB-v0")
-    parser.add_argument("--num-envs", type=int, default=64)
-    parser.add_argument("--steps", type=int, default=300)
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--margin-weights", default=None, help="weights .npz (default: bundled)")
-    args = parser.parse_args()
+    args_parser = parser(__doc__)
+    args_parser.add_argument("--env", default="margin_rl/AnymalB-v1")
+    args_parser.add_argument("--num-envs", type=int, default=64)
+    args_parser.add_argument("--steps", type=int, default=300)
+    args_parser.add_argument("--rounds", type=int, default=5)
+    args_parser.add_argument("--margin-weights", default=None, help="weights .npz (default: bundled)")
+    args = args_parser.parse_args()
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.3, 0.3, size=(args.steps, args.num_envs, 12)).astype(np.float32)
     extra = {"margin_weights": args.margin_weights} if args.margin_weights else {}
@@ -91,23 +97,28 @@ def main() -> None:
             args.env, args.num_envs, actions, mujoco.mjtStage.mjSTAGE_ACC
         ),
     }
-    rates: dict[str, list[float]] = {name: [] for name in runners}
-    for _ in range(args.rounds):
-        for name, run in runners.items():
-            rates[name].append(run())
-    median = {name: statistics.median(values) for name, values in rates.items()}
+    rates = {name: summarise(values) for name, values in interleave(runners, args.rounds).items()}
     names = list(runners)
+    print(machine_line())
     print(f"{args.env}, {args.num_envs} envs, {args.steps} steps, {args.rounds} interleaved rounds (median, min-max)")
     print()
-    print("| configuration | env-steps/s | range |")
-    print("|---|---|---|")
-    for name in names:
-        print(f"| {name} | {median[name]:,.0f} | {min(rates[name]):,.0f}–{max(rates[name]):,.0f} |")
+    print_table(
+        ("configuration", "env-steps/s", "range"),
+        [(name, f"{r.median:,.0f}", f"{r.low:,.0f}–{r.high:,.0f}") for name, r in rates.items()],
+    )
     print()
-    with_margin, without = median[names[0]], median[names[1]]
-    print(f"margin overhead (no margin / learned margin - 1): {100 * (without / with_margin - 1):.1f} %")
-    for raw in names[2:]:
-        print(f"env with the learned margin / {raw}: {100 * with_margin / median[raw]:.0f} %")
+    with_margin, without = rates[names[0]].median, rates[names[1]].median
+    overhead = 100 * (without / with_margin - 1)
+    print(f"margin overhead (no margin / learned margin - 1): {overhead:.1f} %")
+    of_raw = {raw: 100 * with_margin / rates[raw].median for raw in names[2:]}
+    for raw, share in of_raw.items():
+        print(f"env with the learned margin / {raw}: {share:.0f} %")
+    write_record(
+        args.json,
+        "env_steps",
+        args,
+        {"env_steps_per_s": rates, "margin_overhead_pct": overhead, "share_of_raw_pct": of_raw},
+    )
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
 """Experiment: learned vs analytic margin on the states that trained policies actually visit.
 
 Usage:
-    python benchmarks/bench_margin_on_trajectories.py [--bundle anymal_b_v1] [--envs 8] [--steps 500] [--every 5]
-        [--weights PATH_OR_ROBOT ...] [--workers 2]
+    python benchmarks/studies/bench_margin_on_trajectories.py [--bundle anymal_b_v1] [--envs 8] [--steps 500]
+        [--every 5] [--forward-velocity 0.75] [--seed 2000] [--weights PATH_OR_ROBOT ...] [--workers 2]
 
 The held-out test split of a model card measures the learned margin on Table I samples; a policy walks in
 a narrower (and partly different) part of lambda space. This rolls out every policy of a bundle in the

@@ -1,7 +1,7 @@
 """Left-right symmetry of the analytic and the learned margin on fresh Table I states.
 
 Usage:
-    python benchmarks/bench_margin_symmetry.py --robot anymal_c --n 6000 [--weights path/to/weights.npz ...]
+    python benchmarks/studies/bench_margin_symmetry.py --robot anymal_c --n 6000 [--weights path/to/weights.npz ...]
 
 For every state lambda and its mirror image M lambda (:func:`margin_rl.stability.analytic.lambda_state.mirror_lambda`)
 it reports, as a Markdown table:

@@ -1,7 +1,7 @@
 """The distribution of lambda over walking-policy rollouts, against seed 000's Table I sampler.
 
 Usage:
-    python benchmarks/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b_v1 \
+    python benchmarks/studies/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b_v1 \
         [--policy runs/<run>/policy_torchscript.pt ...] [--num-envs 16] [--steps 250] \
         [--json docs/learned_margin/locomotion_distribution_anymal_b.json] [--figure ...png]
 
@@ -33,14 +33,14 @@ from margin_rl.train.artifacts.bundle import load_bundle
 from margin_rl.train.artifacts.policies import load_policy
 
 CONDITIONS: dict[str, tuple[str, dict]] = {
-    "flat, 0.75 m/s": ("{robot}-v0", {}),
+    "flat, 0.75 m/s": ("{robot}-v1", {}),
     "flat, command range": (
-        "{robot}-v0",
+        "{robot}-v1",
         {"command": CommandConfig(forward_velocity=(0.25, 1.0), lateral_velocity=(-0.3, 0.3), yaw_rate=(-0.5, 0.5))},
     ),
-    "flat, pushes": ("{robot}-v0", {"randomization": RandomizationConfig(push_interval_s=2.0)}),
-    "flat, friction 0.4-1.0": ("{robot}-v0", {"randomization": RandomizationConfig(friction=(0.4, 1.0))}),
-    "rough, 0.75 m/s": ("{robot}-Rough-v0", {}),
+    "flat, pushes": ("{robot}-v1", {"randomization": RandomizationConfig(push_interval_s=2.0)}),
+    "flat, friction 0.4-1.0": ("{robot}-v1", {"randomization": RandomizationConfig(friction=(0.4, 1.0))}),
+    "rough, 0.75 m/s": ("{robot}-Rough-v1", {}),
 }
 ENV_NAMES = {"anymal_b": "margin_rl/AnymalB", "anymal_c": "margin_rl/AnymalC"}
 

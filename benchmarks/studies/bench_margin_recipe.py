@@ -1,9 +1,9 @@
 """Experiment: training recipes of the learned margin, side by side on one subset of a dataset.
 
 Usage:
-    python benchmarks/bench_margin_recipe.py --data data/anymal_c --max-samples 600000 \\
+    python benchmarks/studies/bench_margin_recipe.py --data data/anymal_c --max-samples 600000 \\
         --recipe '{"epochs": 15}' --recipe '{"epochs": 15, "schedule": "cosine", "batch_size": 1024, "lr": 4e-3}'
-    python benchmarks/bench_margin_recipe.py --data data/anymal_c --max-samples 600000 \\
+    python benchmarks/studies/bench_margin_recipe.py --data data/anymal_c --max-samples 600000 \\
         --recipe '{"epochs": 15}' --recipe '{"epochs": 15, "mirror": "augment"}' \\
         --recipe '{"epochs": 15, "mirror": "tied"}'
 

@@ -5,35 +5,33 @@ Samples are uniform in the paper's eq. (13) state-action box, so the mix of earl
 
 Usage::
 
-    python benchmarks/bench_slip.py [--n 200000] [--n-ref 300] [--repeats 3]
+    python benchmarks/speed/bench_slip.py [--n 200000] [--n-ref 300] [--repeats 3] [--seed 0] [--json PATH]
 
 Prints a Markdown table of hops per second (best of ``--repeats``).
 """
 
 from __future__ import annotations
 
-import argparse
-import platform
-import time
+import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks.harness
 
 import numpy as np
 
+from benchmarks.harness import durations, machine_line, parser, print_table, write_record
 from margin_rl.slip.dynamics import SlipParams, simulate_batch, simulate_hop
 from margin_rl.slip.margin import sample_box
 
 
 def _best_rate(fn: Callable[[], None], n: int, repeats: int) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return n / best
+    """Hops per second of the fastest of ``repeats`` calls of ``fn`` (``n`` hops each)."""
+    return n / min(durations(fn, repeats))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = parser(__doc__)
     ap.add_argument("--n", type=int, default=200_000, help="hops per batched run")
     ap.add_argument("--n-ref", type=int, default=300, help="hops for the solve_ivp reference")
     ap.add_argument("--repeats", type=int, default=3)
@@ -58,14 +56,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     rows.append(("solve_ivp DOP853 per hop (rtol 1e-10)", args.n_ref, _best_rate(reference, args.n_ref, 1)))
 
-    print(
-        f"aSLIP hop throughput ({platform.processor() or platform.machine()}, "
-        f"numpy {np.__version__}, uniform eq. (13) samples)\n"
+    print(machine_line(("numpy", "scipy")))
+    print("aSLIP hop throughput (uniform eq. (13) samples)\n")
+    print_table(("simulator", "hops", "hops/s"), [(name, n, f"{rate:,.0f}") for name, n, rate in rows], ("", "r", "r"))
+    write_record(
+        args.json, "slip", args, [{"simulator": name, "hops": n, "hops_per_s": rate} for name, n, rate in rows]
     )
-    print("| simulator | hops | hops/s |")
-    print("|---|---:|---:|")
-    for name, n, rate in rows:
-        print(f"| {name} | {n} | {rate:,.0f} |")
     return 0
 
 

@@ -1,7 +1,7 @@
 """Which accelerations should enter lambda? Three estimators along walking episodes, and the margin each gives.
 
 Usage:
-    python benchmarks/bench_acceleration_estimates.py [--bundle anymal_b_v1] [--episodes 4] [--steps 250] \
+    python benchmarks/studies/bench_acceleration_estimates.py [--bundle anymal_b_v1] [--episodes 4] [--steps 250] \
         [--figure docs/learned_margin/acceleration_estimates_anymal_b.png]
 
 The bundled policies (both variants, ``--episodes`` seeds each) walk at 0.75 m/s; after every 20 ms policy
@@ -36,6 +36,7 @@ from margin_rl.envs.stability_input import stability_state_from_simulation
 from margin_rl.stability import LearnedMargin, TableI, analytic_margin
 from margin_rl.train.artifacts.bundle import load_bundle
 from margin_rl.train.artifacts.policies import load_policy
+from margin_rl.train.commands.evaluate import resolve_env
 
 ESTIMATORS = ("finite_difference", "instantaneous", "ema")
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -181,10 +182,9 @@ def main() -> None:
     parser.add_argument("--figure", type=Path, default=None)
     args = parser.parse_args()
     bundle = load_bundle(args.bundle)
-    learned = (
-        LearnedMargin.load(str(bundle.margin_weights)) if bundle.margin_weights else LearnedMargin.load(args.bundle)
-    )
-    robot = args.bundle  # bundles are named after their robot
+    # The robot of the policies' training environment (a bundle's name need not be a robot's: anymal_b_v1).
+    robot = resolve_env(load_policy(bundle.runs[0].policy), None, {})[1].robot
+    learned = LearnedMargin.load(str(bundle.margin_weights)) if bundle.margin_weights else LearnedMargin.load(robot)
     episodes, first = [], None
     for variant, (weight, runs) in bundle.variants().items():
         train_seed, policy_file = runs[0]

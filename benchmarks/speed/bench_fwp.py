@@ -20,30 +20,26 @@ Times are medians over states and ``--repeats`` [ms], wall clock on whatever els
 
 Usage::
 
-    python benchmarks/bench_fwp.py [--states 3] [--repeats 3] [--robot anymal_c] [--n-faces 4]
+    python benchmarks/speed/bench_fwp.py [--states 3] [--repeats 3] [--robot anymal_c] [--n-faces 4] [--json PATH]
 """
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-import clarabel
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks.harness
+
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from margin_rl import load_robot  # noqa: E402
-from margin_rl.robot import Robot  # noqa: E402
-from margin_rl.stability.analytic.margin import ContactProblem, contact_problem  # noqa: E402
-from margin_rl.stability.analytic.sampling import nominal_feet, standing_state  # noqa: E402
-from margin_rl.stability.fwp.feasibility import (  # noqa: E402
+from benchmarks.harness import machine_line, markdown_header, markdown_row, parser, write_record
+from margin_rl import load_robot
+from margin_rl.robot import Robot
+from margin_rl.stability.analytic.contact_problem import contact_problem
+from margin_rl.stability.analytic.sampling import nominal_feet, standing_state
+from margin_rl.stability.fwp.feasibility import (
     contact_problem_polytope,
     feasibility_factor,
     fwp_feasibility,
@@ -75,17 +71,17 @@ def make_states(robot: Robot, n_contacts: int, n_states: int, seed: int) -> list
         tilts = TILTS + (rng.uniform(-0.1, 0.1, (4, 2)) if k else 0.0)
         feet = nominal_feet(robot) + np.column_stack([np.zeros((4, 2)), heights])
         lam = standing_state(robot, feet=feet, mu=0.7, contacts=contacts, normals=np.array([normal(*t) for t in tilts]))
-        if isinstance(contact_problem(robot, lam), ContactProblem):
+        if contact_problem(robot, lam[None])[0].solvable:
             lams.append(lam)
     return lams
 
 
 def measure(robot: Robot, lam: np.ndarray, n_faces: int) -> dict[str, Any]:
     """One pass over every step; times in ms."""
-    problem = contact_problem(robot, lam)
-    assert isinstance(problem, ContactProblem)
+    problem = contact_problem(robot, lam[None])[0]  # one state: a batch of one
+    assert problem.solvable
     fwp = contact_problem_polytope(problem, n_faces=n_faces)
-    w = problem.gravito_inertial_wrench()
+    w = problem.wrench  # gravito-inertial wrench about the CoM
     on_vertices = feasibility_factor(fwp.vertices, w, center=fwp.center, length_scale=fwp.length_scale)
     primal = feasibility_factor(fwp.vertices, w, center=fwp.center, length_scale=fwp.length_scale, dual=False)
     on_summands = minkowski_feasibility_factor(fwp, w)
@@ -112,30 +108,23 @@ def measure(robot: Robot, lam: np.ndarray, n_faces: int) -> dict[str, Any]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--states", type=int, default=3, help="stances per case (the first is the reference)")
-    parser.add_argument("--repeats", type=int, default=3, help="timed passes per stance")
-    parser.add_argument("--robot", default="anymal_c")
-    parser.add_argument("--n-faces", type=int, default=4, help="faces of the linearised friction cones")
-    parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args_parser = parser(__doc__)
+    args_parser.add_argument("--states", type=int, default=3, help="stances per case (the first is the reference)")
+    args_parser.add_argument("--repeats", type=int, default=3, help="timed passes per stance")
+    args_parser.add_argument("--robot", default="anymal_c")
+    args_parser.add_argument("--n-faces", type=int, default=4, help="faces of the linearised friction cones")
+    args_parser.add_argument("--seed", type=int, default=0)
+    args = args_parser.parse_args()
 
     robot = load_robot(args.robot)
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as fh:
-            cpu = next(line.split(":", 1)[1].strip() for line in fh if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
     print(f"# FWP benchmark: {args.robot}, {args.n_faces}-face friction pyramids, static non-coplanar stances")
-    print(f"CPU: {cpu}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
-    print(f"numpy {np.__version__}, clarabel {clarabel.__version__}")
+    print(machine_line())
     print(f"Medians over {args.states} stance(s) x {args.repeats} repeat(s) [ms]; paper values in parentheses.\n")
-    print(
-        "| contacts | B_i vertices | tested | FWP vertices (paper) | LP vars / rows (paper) | V-descr. (paper) "
-        "| LP (24) (paper) | its dual | summand LP | end to end, prune=False | end to end, prune=True |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    header = ("contacts", "B_i vertices", "tested", "FWP vertices (paper)", "LP vars / rows (paper)",
+              "V-descr. (paper)", "LP (24) (paper)", "its dual", "summand LP", "end to end, prune=False",
+              "end to end, prune=True")  # fmt: skip
+    print("\n".join(markdown_header(header)))
+    record = {}
     for n_contacts in (3, 4):
         runs = []
         for lam in make_states(robot, n_contacts, args.states, args.seed):
@@ -149,12 +138,27 @@ def main() -> None:
         counts = sorted({r["vertices"] for r in runs})
         span = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
         print(
-            f"| {n_contacts} | {', '.join(map(str, ref['b_i']))} | {ref['tested']} | {span} ({paper['vertices']}) "
-            f"| {ref['variables']} / {ref['constraints']} ({paper['variables']} / 7) "
-            f"| {med('v_descr'):.0f} ({paper['v_descr_ms']:.0f}) | {med('lp'):.1f} ({paper['lp_ms']:.0f}) "
-            f"| {med('lp_dual'):.1f} | {med('summand_lp'):.1f} | {med('e2e_fast'):.1f} | {med('e2e_paper'):.0f} |"
-        )
+            markdown_row(
+                (n_contacts, ", ".join(map(str, ref["b_i"])), ref["tested"], f"{span} ({paper['vertices']})",
+                 f"{ref['variables']} / {ref['constraints']} ({paper['variables']} / 7)",
+                 f"{med('v_descr'):.0f} ({paper['v_descr_ms']:.0f})", f"{med('lp'):.1f} ({paper['lp_ms']:.0f})",
+                 f"{med('lp_dual'):.1f}", f"{med('summand_lp'):.1f}", f"{med('e2e_fast'):.1f}",
+                 f"{med('e2e_paper'):.0f}")
+            ),
+            flush=True,
+        )  # fmt: skip
+        timed = ("v_descr", "lp", "lp_dual", "summand_lp", "e2e_fast", "e2e_paper")
+        record[f"{n_contacts} contacts"] = {
+            "b_i_vertices": ref["b_i"],
+            "tested": ref["tested"],
+            "fwp_vertices": counts,
+            "lp_variables": ref["variables"],
+            "lp_constraints": ref["constraints"],
+            "median_ms": {key: med(key) for key in timed},
+            "paper": paper,
+        }
     print("\nB_i and tested: the reference stance; FWP vertices: range over the stances.")
+    write_record(args.json, "fwp", args, record)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Paper network vs physics-informed model on the same labelled data, same split, same training budget.
 
-    .venv/bin/python benchmarks/bench_margin_architecture.py --data data/v2_anymal_c_300k --epochs 20 \\
+    .venv/bin/python benchmarks/studies/bench_margin_architecture.py --data data/v2_anymal_c_300k --epochs 20 \\
         --train-subset 75000 --train-subset 0 --recipe paper --recipe physics --recipe physics:0
 
 Every run uses one seeded train / validation / test split of the whole dataset (``training.split_indices``),

@@ -1,7 +1,7 @@
 """Speed of the seed 000 §V-B walk problem: learned margin (CasADi, exact gradient) vs analytic margin +
 finite differences, side by side in one process.
 
-    taskset -c 0 .venv/bin/python benchmarks/bench_planning.py --repeats 3 --analytic-iterations 8
+    taskset -c 0 .venv/bin/python benchmarks/speed/bench_planning.py --repeats 3 --analytic-iterations 8 [--json PATH]
 
 The problem: ANYmal C (or --robot), walk gait, T = 3 s, dT = 0.2 s, from standing at rest to a target
 0.45 m ahead at the walk's speed, on the ``course`` map at its start (flat there) or --scenario.
@@ -12,13 +12,15 @@ iteration compares; a third row without any margin constraint shows the rest of 
 
 from __future__ import annotations
 
-import argparse
-import json
-import platform
+import sys
 import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks.harness
 
 import numpy as np
 
+from benchmarks.harness import durations, interleave, machine_line, parser, print_table, write_record
 from margin_rl.planning import (
     WALK,
     BaseState,
@@ -33,13 +35,12 @@ from margin_rl.stability import LearnedMargin
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robot", default="anymal_c")
-    parser.add_argument("--scenario", default="course")
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--analytic-iterations", type=int, default=8)
-    parser.add_argument("--json", default=None, help="also write the results here")
-    args = parser.parse_args()
+    args_parser = parser(__doc__)
+    args_parser.add_argument("--robot", default="anymal_c")
+    args_parser.add_argument("--scenario", default="course")
+    args_parser.add_argument("--repeats", type=int, default=3)
+    args_parser.add_argument("--analytic-iterations", type=int, default=8)
+    args = args_parser.parse_args()
 
     robot = load_robot(args.robot)
     model = planning_robot(robot)
@@ -61,11 +62,16 @@ def main() -> None:
         tic = time.perf_counter()
         problems[name] = TrajectoryProblem(model, hm, WALK, 0.0, config, margin)
         problems[name].build_seconds = time.perf_counter() - tic
-    rows: dict[str, list] = {name: [] for name in variants}
-    for _ in range(args.repeats):
-        for name, problem in problems.items():  # interleaved: the rows share the machine's state
+
+    def runner(problem: TrajectoryProblem):
+        def run(_round: int) -> tuple[int, float, str]:
             plan = problem.solve(initial, target, footholds)
-            rows[name].append((plan.iterations, plan.solve_seconds, plan.status))
+            return plan.iterations, plan.solve_seconds, plan.status
+
+        return run
+
+    # interleaved: the rows share the machine's state
+    rows = interleave({name: runner(problem) for name, problem in problems.items()}, args.repeats)
 
     # Cost of one margin value + gradient at the 16 nodes, outside IPOPT.
     import casadi as ca
@@ -83,35 +89,32 @@ def main() -> None:
     single = ca.MX.sym("lam", 47)
     f_analytic = analytic_margin_function(robot, 2e-3)
     g_analytic = ca.Function("g_analytic", [single], [f_analytic(single), ca.jacobian(f_analytic(single), single)])
-    t_learned = []
-    for _ in range(20):
-        tic = time.perf_counter()
-        g_learned(lams.T)
-        t_learned.append(time.perf_counter() - tic)
+    t_learned = durations(lambda: g_learned(lams.T), 20)
     tic = time.perf_counter()
     for lam in lams:
         g_analytic(lam)
     t_analytic = time.perf_counter() - tic
 
-    print(f"machine: {platform.processor() or platform.machine()}, python {platform.python_version()}")
+    print(machine_line())
     print(
         f"problem: {args.robot}, walk, {args.scenario}, T = 3.0 s, dT = 0.2 s: "
         f"{learned_problem.n_decision} variables, {learned_problem.n_constraints} constraints "
         f"({learned_problem.schedule.n_nodes} margin constraints), {len(learned_problem.schedule.slots)} footholds"
     )
-    print("| variant | build s | iterations (median) | total s (median) | ms / iteration (median) | status |")
-    print("|---|---|---|---|---|---|")
-    summary = {}
+    summary, table = {}, []
     for name, values in rows.items():
         iters = np.array([v[0] for v in values])
         secs = np.array([v[1] for v in values])
         per = 1000 * secs / np.maximum(iters, 1)
         statuses = sorted({v[2] for v in values})
-        print(
-            f"| {name} | {problems[name].build_seconds:.2f} | {np.median(iters):.0f} | {np.median(secs):.3f} "
-            f"| {np.median(per):.1f} | {', '.join(statuses)} |"
-        )
+        table.append(
+            (name, f"{problems[name].build_seconds:.2f}", f"{np.median(iters):.0f}", f"{np.median(secs):.3f}",
+             f"{np.median(per):.1f}", ", ".join(statuses))
+        )  # fmt: skip
         summary[name] = {"iterations": iters.tolist(), "seconds": secs.tolist(), "ms_per_iteration": per.tolist()}
+    print_table(
+        ("variant", "build s", "iterations (median)", "total s (median)", "ms / iteration (median)", "status"), table
+    )
     ratio = np.median(summary["analytic + finite differences"]["ms_per_iteration"]) / np.median(
         summary["learned (CasADi MLP, exact gradient)"]["ms_per_iteration"]
     )
@@ -120,9 +123,10 @@ def main() -> None:
         f"margin value + gradient at all {n} nodes: learned {1000 * np.median(t_learned):.2f} ms, "
         f"analytic + forward differences {1000 * t_analytic:.0f} ms ({t_analytic / np.median(t_learned):.0f}x)"
     )
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(summary, fh, indent=2)
+    node_seconds = {"learned_median": float(np.median(t_learned)), "analytic_forward_differences": t_analytic}
+    write_record(
+        args.json, "planning", args, {"variants": summary, "margin_value_and_gradient_all_nodes_s": node_seconds}
+    )
 
 
 if __name__ == "__main__":

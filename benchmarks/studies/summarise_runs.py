@@ -1,7 +1,7 @@
 """Summarise evaluated training runs into one small JSON and a Markdown table (what is committed of a run).
 
 Usage:
-    python benchmarks/summarise_runs.py runs/v2_sweep/b_mw*_s* --eval eval5000 \
+    python benchmarks/studies/summarise_runs.py runs/v2_sweep/b_mw*_s* --eval eval5000 \
         --json docs/comparison/v2_sweep_anymal_b.json
 
 Each run directory holds ``config.json`` (``margin_rl.train.commands.train``) and ``<eval>/metrics.json``
@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from margin_rl.envs.config import upgrade_stored_env_config
 from margin_rl.train.analysis.significance import compare_seeds, difference_table
 
 METRICS = (
@@ -44,7 +45,8 @@ def run_summary(run: Path, eval_name: str) -> dict[str, object]:
     if not metrics_path.is_file():
         raise SystemExit(f"{run}: no {eval_name}/metrics.json; evaluate the run first (see the module docstring)")
     metrics = json.loads(metrics_path.read_text())
-    env = config.get("env_config", {})
+    env = upgrade_stored_env_config(config.get("env_config", {}))  # runs stored by EnvConfig v0 too
+    reward_params = env.get("reward_params") or {}
     progress = json.loads((run / "progress.json").read_text()) if (run / "progress.json").is_file() else {}
     return {
         "run": run.name,
@@ -54,8 +56,8 @@ def run_summary(run: Path, eval_name: str) -> dict[str, object]:
         "env_steps": progress.get("env_steps"),
         "margin_weights": env.get("margin_weights") or f"bundled {env.get('robot')}",
         "acceleration_filter": env.get("acceleration_filter"),
-        "alive_bonus": env.get("alive_bonus"),
-        "knee_clearance": env.get("knee_clearance", 0.0),
+        "alive_bonus": reward_params.get("alive_bonus"),
+        "knee_clearance": reward_params.get("knee_clearance", 0.0),
         "init_from": config.get("init_from"),  # warm start (train --init-from), None: trained from scratch
         "evaluation": {
             "episodes": metrics.get("episodes"),

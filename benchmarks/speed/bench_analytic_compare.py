@@ -2,10 +2,10 @@
 
 Usage:
     mkdir -p /tmp/baseline && git archive <rev> margin_rl | tar -x -C /tmp/baseline
-    taskset -c 0 .venv/bin/python benchmarks/bench_analytic_compare.py --baseline /tmp/baseline [--n 300]
+    taskset -c 0 .venv/bin/python benchmarks/speed/bench_analytic_compare.py --baseline /tmp/baseline [--n 300]
 
 Options: --robot (anymal_c), --n states per stance type (300), --rounds timed calls per state and copy (3),
---seed (0).
+--seed (0), --json PATH (a JSON record of the results and the machine).
 
 On a shared machine two benchmark runs minutes apart measure different loads, so this script imports
 the baseline package (a directory holding a ``margin_rl`` package, e.g. an older revision unpacked by
@@ -17,17 +17,18 @@ states, and checks that both give the same statuses and margins (max |difference
 
 from __future__ import annotations
 
-import argparse
 import importlib
-import platform
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks.harness
+
 import numpy as np
 
+from benchmarks.harness import machine_line, parser, print_table, round_order, write_record
 from margin_rl import load_robot
 from margin_rl.stability.analytic.lambda_state import from_lambda
 from margin_rl.stability.analytic.margin import analytic_margin
@@ -65,13 +66,13 @@ def load_baseline(src: Path, robot_name: str) -> tuple[Any, Callable[..., Any]]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--baseline", type=Path, required=True, help="directory holding the baseline margin_rl")
-    parser.add_argument("--robot", default="anymal_c")
-    parser.add_argument("--n", type=int, default=300, help="states per stance type")
-    parser.add_argument("--rounds", type=int, default=3, help="timed calls per state and copy")
-    parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
+    args_parser = parser(__doc__)
+    args_parser.add_argument("--baseline", type=Path, required=True, help="directory holding the baseline margin_rl")
+    args_parser.add_argument("--robot", default="anymal_c")
+    args_parser.add_argument("--n", type=int, default=300, help="states per stance type")
+    args_parser.add_argument("--rounds", type=int, default=3, help="timed calls per state and copy")
+    args_parser.add_argument("--seed", type=int, default=0)
+    args = args_parser.parse_args()
 
     base_robot, base_margin = load_baseline(args.baseline, args.robot)
     robot = load_robot(args.robot)
@@ -81,18 +82,17 @@ def main() -> None:
     for fn, rb in variants.values():
         fn(rb, pool[0])  # warm-up (imports, caches)
 
-    print(f"robot {args.robot}, {platform.processor() or platform.machine()}, baseline {args.baseline}")
+    print(machine_line())
+    print(f"robot {args.robot}, baseline {args.baseline}")
     print()
-    print("| contacts | n | baseline median ms | current median ms | current / baseline | max abs margin diff m |")
-    print("|---|---|---|---|---|---|")
+    rows, record = [], {}
     for k in (4, 3, 2):
         lams = pool[n_contacts == k][: args.n]
         times: dict[str, list[float]] = {name: [] for name in variants}
         results: dict[str, list[Any]] = {name: [] for name in variants}
         for r in range(args.rounds):
             for i, lam in enumerate(lams):
-                order = list(variants) if (i + r) % 2 == 0 else list(reversed(variants))
-                for name in order:
+                for name in round_order(list(variants), i + r):
                     fn, rb = variants[name]
                     t0 = time.perf_counter()
                     res = fn(rb, lam)
@@ -107,10 +107,26 @@ def main() -> None:
         diff = np.abs(margins["current"] - margins["baseline"])
         max_diff = float(np.nanmax(diff)) if np.isfinite(diff).any() else 0.0
         med = {name: float(np.median(times[name])) * 1e3 for name in variants}
-        print(
-            f"| {k} | {len(lams)} | {med['baseline']:.3f} | {med['current']:.3f} "
-            f"| {med['current'] / med['baseline']:.3f} | {max_diff:.2e} |"
+        ratio = med["current"] / med["baseline"]
+        rows.append(
+            (k, len(lams), f"{med['baseline']:.3f}", f"{med['current']:.3f}", f"{ratio:.3f}", f"{max_diff:.2e}")
         )
+        record[f"{k} contacts"] = {
+            "states": len(lams),
+            "median_ms": med,
+            "ratio": ratio,
+            "max_abs_margin_diff_m": max_diff,
+        }
+    headers = (
+        "contacts",
+        "n",
+        "baseline median ms",
+        "current median ms",
+        "current / baseline",
+        "max abs margin diff m",
+    )
+    print_table(headers, rows)
+    write_record(args.json, "analytic_compare", args, record)
 
 
 if __name__ == "__main__":

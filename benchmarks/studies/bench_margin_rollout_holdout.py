@@ -1,15 +1,15 @@
-"""Learned margins on the states of a walking policy that none of their labels came from (learned margin v2).
+"""Learned margins on the states of a walking policy that none of their labels came from.
 
 Usage:
     # 1. record the visited lambdas of the bundled ANYmal B policies (6 policies x 5 conditions x 8 envs x 250 steps)
-    python benchmarks/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b_v1 --num-envs 8 --steps 250 \
-        --states data/rollouts_anymal_b.npz
+    python benchmarks/studies/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b_v1 --num-envs 8 \
+        --steps 250 --states data/rollouts_anymal_b.npz
     # 2. split them by policy: the last policy's states are held out
-    python benchmarks/bench_margin_rollout_holdout.py split --states data/rollouts_anymal_b.npz --policies 6 \
+    python benchmarks/studies/bench_margin_rollout_holdout.py split --states data/rollouts_anymal_b.npz --policies 6 \
         --block 2000 --train data/rollouts_b_train.npz --test data/rollouts_b_test.npz
     # 3. label states around the other policies' states, train (see BENCHMARKS.md), then compare weights:
-    python benchmarks/bench_margin_rollout_holdout.py evaluate --robot anymal_b --test data/rollouts_b_test.npz \
-        --weights anymal_b --weights data/w_v2_rollouts_b.npz ...
+    python benchmarks/studies/bench_margin_rollout_holdout.py evaluate --robot anymal_b \
+        --test data/rollouts_b_test.npz --weights anymal_b --weights data/w_v2_rollouts_b.npz ...
 
 ``evaluate`` labels the held-out states with the analytic margin m_a and the extended margin m_x
 (:mod:`margin_rl.stability.analytic.extended`; cached beside the test file) and prints, per weights file, the RMSE,

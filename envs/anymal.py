@@ -1,4 +1,4 @@
-"""``margin_rl/AnymalB-v0``, ``AnymalC-v0`` and their ``-Rough-v0`` variants: one Gymnasium environment.
+"""``margin_rl/AnymalB-v1``, ``AnymalC-v1`` and their ``-Rough-v1`` variants: one Gymnasium environment.
 
 ANYmal walks at a commanded heading velocity (0.75 m/s by default) with the reward of seed 000 §V-C,
 
@@ -29,26 +29,50 @@ usual locomotion regularisers (torques, action rate, orientation, feet air time,
   have no physical bound short of the divergence check, and Gymnasium's MuJoCo robots do the same.
 * Episode: ``EnvConfig.episode_length_s`` (20 s = 1000 steps by default), truncated by the environment
   itself (the ids carry no TimeLimit, so ``gymnasium.make(id, episode_length_s=10)`` gives 500-step
-  episodes; ``max_episode_steps=`` adds a TimeLimit as usual); terminated on base or thigh contact with the
-  terrain, base height below 0.25 m above the terrain, tilt above 1 rad, or a diverged simulation
-  (``info["diverged"]``). A non-finite reward or observation is never returned: it raises FloatingPointError.
+  episodes; ``max_episode_steps=`` adds a TimeLimit as usual); terminated when any of the named causes of
+  :mod:`margin_rl.envs.terminations` holds: ``base_contact`` or ``thigh_contact`` with the terrain,
+  ``base_height`` below 0.25 m above the terrain, ``tilt`` above 1 rad, or a ``diverged`` simulation. A
+  non-finite reward or observation is never returned: it raises FloatingPointError.
 * ``info``: every weighted reward term as ``reward_<term>`` (their sum is the reward), ``margin``,
   ``base_lin_acc`` and ``base_ang_acc`` (base frame; finite differences over the policy step),
-  ``base_lin_vel``, ``velocity_error``, ``contacts``, ``stance_width``, ``fell``, ``diverged``, and
+  ``base_lin_vel``, ``velocity_error``, ``contacts``, ``stance_width``, ``fell`` (terminated, not diverged),
+  ``diverged``, ``termination_<cause>`` for each cause (1.0 where it holds this step, several may), and
   ``lambda``: the (47,) stability state the margin was evaluated on (seed 000 eq. 4; layout
   :data:`margin_rl.stability.LAMBDA_FIELDS`, one name per entry from :func:`margin_rl.stability.lambda_names`,
   decoded by :func:`margin_rl.stability.from_lambda`), so it can be logged, labelled or fed to another margin.
 * Options: ``config=EnvConfig(...)`` or any EnvConfig field as a keyword (``margin_weight``,
-  ``reward_preset``, ``randomization=RandomizationConfig(friction=(0.4, 1.0), push_interval_s=5.0,
-  observation_noise=1.0, ...)``, ``command=CommandConfig(forward_velocity=(0.25, 1.0))``), each checked
-  when the config is built, plus ``render_mode``, ``width``, ``height``.
+  ``reward_preset``, ``reward_params={"alive_bonus": 0.1, "knee_clearance": 5.0}`` (the keys named change,
+  the others keep their values), ``randomization=RandomizationConfig(friction=(0.4, 1.0),
+  push_interval_s=5.0, observation_noise=1.0, ...)``, ``command=CommandConfig(forward_velocity=(0.25, 1.0))``),
+  each checked when the config is built, plus ``render_mode``, ``width``, ``height``.
+* Seeds: ``reset(seed=s)`` takes None or an int >= 0 (numpy ints too); anything else raises Gymnasium's own
+  ``gymnasium.error.Error`` (as :func:`gymnasium.utils.seeding.np_random` does), as :class:`SeedError` /
+  :class:`SeedTypeError`, which are also ValueError / TypeError.
+* Copies: the environment (and the vector one) pickles and deep-copies, through Gymnasium's wrappers too; the
+  copy is rebuilt from the config and given the whole state (simulation, random generator, commands, filters,
+  pushes, episode counters), so it steps to exactly the same numbers as the original from there on.
 * Rendering: ``"rgb_array"`` everywhere (headless: ``MUJOCO_GL=egl`` or ``osmesa``); ``"human"`` (MuJoCo's
   passive viewer) only where a display can open: ``metadata["render_modes"]`` of an instance lists it only
   when a display is configured, and asking for it without one raises :class:`DisplayUnavailableError`
   (MuJoCo's viewer would otherwise end the process from its GLFW thread, with nothing to catch).
 
 Version history:
-* v0: initial release.
+
+* v1: same dynamics, observations, rewards and termination conditions as v0 (a v0 policy runs unchanged). The
+  termination causes are named terms, each reported per step as ``info["termination_<cause>"]`` (``fell`` and
+  ``diverged`` kept); the reward's added weights and parameters are one mapping, ``reward_params`` (v0's
+  top-level ``alive_bonus``, ``knee_clearance``, ``knee_clearance_height``, ``logistic_gain``; on the command
+  line ``--env-option reward_params.alive_bonus=0.1``); the native vector env takes ``autoreset_mode``
+  (``NEXT_STEP``, Gymnasium's default, is now its default; ``SAME_STEP`` as in v0) and has ``call``,
+  ``get_attr``, ``set_attr``; the environments pickle and deep-copy; bad seeds raise ``gymnasium.error.Error``.
+* v0: initial release: one termination flag, the reward's weights and parameters as top-level EnvConfig fields,
+  same-step autoreset only in the vector env. While the id stayed v0, the acceleration filter's default became
+  0.5 (it was 0.0; stored runs keep theirs in config.json) and the knee-clearance term was added (off by default).
+
+The ``-v0`` ids are not registered any more: ``gymnasium.make("margin_rl/AnymalB-v0")`` raises Gymnasium's own
+``gymnasium.error.DeprecatedEnv`` naming the ``-v1`` id. Run directories and policy bundles that stored a ``-v0``
+id, and their v0 EnvConfig fields, are read as v1 (same dynamics) in one place each:
+:func:`margin_rl.registration.current_env_id` and :func:`margin_rl.envs.config.upgrade_stored_env_config`.
 """
 
 from __future__ import annotations
@@ -67,23 +91,26 @@ from gymnasium.error import ResetNeeded
 from margin_rl.envs.config import EnvConfig, check_int
 from margin_rl.envs.core import AnymalCore
 from margin_rl.envs.observations import observation_size, observation_structure
+from margin_rl.robot import mjcf_names
 
 ACTION_SIZE = 12
 """One joint-position offset per joint (4 legs x HAA, HFE, KFE)."""
 
 
 def make_config(config: EnvConfig | None, robot: str, terrain: str, overrides: dict[str, Any]) -> EnvConfig:
-    """The environment config: ``config`` (or the defaults for robot/terrain) with keyword overrides."""
+    """The environment config: ``config`` (or the defaults for robot/terrain) with keyword overrides (a mapping
+    for ``reward_params`` changes the keys it names)."""
     if config is not None and not isinstance(config, EnvConfig):
         raise TypeError(
             f"config must be an EnvConfig or None, got {type(config).__name__}; pass config=EnvConfig(...) "
             "or the fields as keywords"
         )
     base = config if config is not None else EnvConfig(robot=robot, terrain=terrain)
-    unknown = set(overrides) - set(EnvConfig.__dataclass_fields__)
+    unknown = sorted(set(overrides) - set(EnvConfig.__dataclass_fields__))
     if unknown:
         raise TypeError(
-            f"unknown environment options {sorted(unknown)}; EnvConfig fields: {sorted(EnvConfig.__dataclass_fields__)}"
+            f"unknown environment options {unknown}; EnvConfig fields: {sorted(EnvConfig.__dataclass_fields__)}"
+            f"{EnvConfig.unknown_field_hint(unknown)}"
         )
     return base.replace(**overrides) if overrides else base
 
@@ -112,11 +139,26 @@ def check_actions(actions: object, shape: tuple[int, ...], hint: str) -> np.ndar
     return values
 
 
+class SeedError(gymnasium.error.Error, ValueError):
+    """A negative seed: Gymnasium's own error type (``gymnasium.utils.seeding.np_random`` raises
+    ``gymnasium.error.Error``), and a ValueError."""
+
+
+class SeedTypeError(gymnasium.error.Error, TypeError):
+    """A seed that is not an int: Gymnasium's own error type, and a TypeError."""
+
+
 def check_seed(seed: object, where: str = "seed") -> int | None:
-    """``seed`` as a Python int (numpy integers accepted) or None; TypeError/ValueError otherwise."""
+    """``seed`` as a Python int (numpy integers accepted) or None; :class:`SeedTypeError` (not an int) or
+    :class:`SeedError` (negative) otherwise, both ``gymnasium.error.Error``."""
     if seed is None:
         return None
-    check_int(where, seed, minimum=0, hint="None, or a non-negative int for a reproducible reset")
+    try:
+        check_int(where, seed, minimum=0, hint="None, or a non-negative int for a reproducible reset")
+    except TypeError as exc:
+        raise SeedTypeError(str(exc)) from None
+    except ValueError as exc:
+        raise SeedError(str(exc)) from None
     return int(seed)
 
 
@@ -198,12 +240,18 @@ class FrameRenderer:
         self._camera = mujoco.MjvCamera()
         self._camera.distance, self._camera.elevation, self._camera.azimuth = 2.5, -20.0, 120.0
 
+    def __getstate__(self) -> dict[str, Any]:  # the OpenGL renderer and the camera are rebuilt, not copied
+        return {"core": self.core, "width": self.width, "height": self.height}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["core"], state["width"], state["height"])
+
     def frame(self, env: int) -> np.ndarray:
         """(height, width, 3) uint8 image of environment ``env``."""
         if self._renderer is None:  # built on first use: it needs an OpenGL context (MUJOCO_GL)
             self._renderer = mujoco.Renderer(self.core.model, self.height, self.width)
         data = self.core.render_data(env)
-        self._camera.lookat[:] = data.qpos[:3]
+        self._camera.lookat[:] = data.qpos[mjcf_names.BASE_POSITION_QPOS]
         self._renderer.update_scene(data, self._camera)
         return self._renderer.render()
 
@@ -254,6 +302,9 @@ class AnymalEnv(gymnasium.Env):
     @property
     def dt(self) -> float:
         return self.core.dt
+
+    def __getstate__(self) -> dict[str, Any]:  # an open viewer window is not copied
+        return {**self.__dict__, "_viewer": None}
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[np.ndarray, dict]:
         seed = check_seed(seed)

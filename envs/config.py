@@ -5,7 +5,13 @@ as written (per policy step), and the shaped preset's weights are per policy ste
 
 Every config checks its fields when it is built (``__post_init__``): a wrong type raises TypeError, a
 non-finite, wrongly signed or out-of-range number ValueError, each naming the field (``EnvConfig.margin_weight``)
-and the accepted values. Valid values are stored as given, never converted.
+and the accepted values. Valid values are stored as given, never converted, with one exception: a mapping
+given for ``EnvConfig.reward_params`` becomes a :class:`RewardParams` (its keys checked by name).
+
+The reward's added weights and parameters live in one mapping, ``EnvConfig.reward_params``
+(:class:`RewardParams`: ``alive_bonus``, ``knee_clearance``, ``knee_clearance_height``, ``logistic_gain``);
+until EnvConfig v1 (the ``-v1`` ids) they were top-level fields. Stored v0 configs are translated in one place,
+:func:`upgrade_stored_env_config` (table :data:`LEGACY_FIELDS`).
 """
 
 from __future__ import annotations
@@ -14,8 +20,9 @@ import dataclasses
 import math
 import numbers
 import os
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -268,6 +275,80 @@ class TerminationConfig:
 
 
 @dataclass(frozen=True)
+class RewardParams(Mapping):
+    """The weights of the terms added to any reward preset, and the reward's parameters: one mapping.
+
+    Read like a dict (``params["alive_bonus"]``, ``dict(params)``) or by attribute; built from a mapping of
+    some of its keys with :meth:`from_mapping` (an unknown key is an error listing the known ones).
+    """
+
+    # reward per policy step while the episode runs (term "alive"), added to any preset (the comparison gives
+    # both variants the same bonus: the paper's L + m is negative per step for a trot, and PPO then learns to fall)
+    alive_bonus: float = 0.0
+    # Penalty per metre of knee below knee_clearance_height, summed over the legs (term "knee_clearance", 0: off),
+    # added to any preset. The margin rewards a low CoM (the ICP offset v/omega_0 shrinks with height) and a wide
+    # stance, and margin policies learned a crouched gait whose knees touch the floor (BENCHMARKS "Why the margin
+    # policies fall"); the comparison gives both variants the same term.
+    knee_clearance: float = 0.0
+    knee_clearance_height: float = 0.2  # [m] above the terrain under the knee
+    logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
+
+    def __post_init__(self) -> None:
+        where = "RewardParams"
+        check_number(f"{where}.alive_bonus", self.alive_bonus, minimum=0.0, hint="reward per step while alive")
+        check_number(
+            f"{where}.knee_clearance", self.knee_clearance, minimum=0.0, hint="penalty per m of knee too low, 0: off"
+        )
+        check_number(
+            f"{where}.knee_clearance_height", self.knee_clearance_height, minimum=0.0, hint="[m] above the terrain"
+        )
+        # L is even (L(x) = L(-x)), so only the gain's size matters; 0 would make the velocity term constant.
+        check_number(f"{where}.logistic_gain", self.logistic_gain, minimum=0.0, min_open=True, hint="[s/m]")
+
+    @classmethod
+    def keys_known(cls) -> tuple[str, ...]:
+        """The keys, in order."""
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    @classmethod
+    def check_keys(cls, mapping: Mapping[str, Any], where: str = "EnvConfig.reward_params") -> None:
+        """TypeError naming every unknown key of ``mapping`` and listing the known ones."""
+        if not isinstance(mapping, Mapping):
+            raise TypeError(f"{where} must be a mapping of {', '.join(cls.keys_known())}, got {mapping!r}")
+        unknown = [key for key in mapping if key not in cls.keys_known()]
+        if unknown:
+            raise TypeError(
+                f"{where}: unknown key(s) {unknown}; the known keys are {', '.join(cls.keys_known())} "
+                "(reward weights of the added terms and reward parameters)"
+            )
+
+    @classmethod
+    def from_mapping(cls, mapping: Mapping[str, Any], where: str = "EnvConfig.reward_params") -> RewardParams:
+        """The params with the keys of ``mapping``, the defaults elsewhere (unknown keys: TypeError)."""
+        cls.check_keys(mapping, where)
+        try:
+            return cls(**dict(mapping))
+        except (TypeError, ValueError) as exc:  # a bad value: say which mapping it came in
+            raise type(exc)(f"{where}: {exc}") from exc
+
+    def replace(self, **changes: Any) -> RewardParams:
+        """A copy with the named keys changed (unknown keys: TypeError listing the known ones)."""
+        self.check_keys(changes)
+        return dataclasses.replace(self, **changes)
+
+    def __getitem__(self, key: str) -> float:
+        if key not in self.keys_known():
+            raise KeyError(f"{key!r}: the reward parameters are {', '.join(self.keys_known())}")
+        return getattr(self, key)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.keys_known())
+
+    def __len__(self) -> int:
+        return len(self.keys_known())
+
+
+@dataclass(frozen=True)
 class EnvConfig:
     """Everything that defines an ANYmal environment."""
 
@@ -281,16 +362,10 @@ class EnvConfig:
     margin: str = "learned"  # a name of margin_rl.envs.margin_kinds.MARGIN_KINDS
     margin_weight: float = 1.0  # weight of the margin term; 0 is the baseline of the comparison
     margin_weights: str | None = None  # learned-margin weights (.npz with its card); None: the robot's bundled
-    # reward per policy step while the episode runs, added to any preset (the comparison gives both variants
-    # the same bonus: the paper's L + m is negative per step for a trot, and PPO then learns to fall)
-    alive_bonus: float = 0.0
-    # Penalty per metre of knee below knee_clearance_height, summed over the legs (0: off), added to any
-    # preset. The margin rewards a low CoM (the ICP offset v/omega_0 shrinks with height) and a wide stance,
-    # and margin policies learned a crouched gait whose knees touch the floor (BENCHMARKS "Why the margin
-    # policies fall"); the comparison gives both variants the same term.
-    knee_clearance: float = 0.0
-    knee_clearance_height: float = 0.2  # [m] above the terrain under the knee
-    logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
+    # Weights of the terms added to any preset and the reward's parameters (RewardParams); a mapping of some
+    # of its keys is accepted too: reward_params={"alive_bonus": 0.1} (the others keep their defaults here,
+    # and keep the config's values in replace() and in gymnasium.make keywords).
+    reward_params: RewardParams = field(default_factory=RewardParams)
     # EMA factor on the finite-difference accelerations in lambda (0: none). 0.5 halves the touchdown-impact
     # noise that otherwise drives the margin term (learned margin v2, item 2: BENCHMARKS "Accelerations in
     # lambda"); runs recorded before v2 keep their 0.0 in their config.json.
@@ -302,6 +377,8 @@ class EnvConfig:
 
     def __post_init__(self) -> None:
         where = "EnvConfig"
+        if isinstance(self.reward_params, Mapping) and not isinstance(self.reward_params, RewardParams):
+            object.__setattr__(self, "reward_params", RewardParams.from_mapping(self.reward_params))
         check_choice(f"{where}.robot", self.robot, available_robots())
         check_choice(f"{where}.terrain", self.terrain, ("flat", "rough"))
         check_choice(f"{where}.reward_preset", self.reward_preset, tuple(REWARD_PRESETS))
@@ -315,6 +392,13 @@ class EnvConfig:
             value = getattr(self, name)
             built = f"{name}={cls.__name__}(**{value!r})" if isinstance(value, dict) else f"{name}={cls.__name__}(...)"
             check_instance(f"{where}.{name}", value, cls, f"pass {built}")
+        example = "{'alive_bonus': 0.1}"
+        check_instance(
+            f"{where}.reward_params",
+            self.reward_params,
+            RewardParams,
+            f"pass a mapping such as reward_params={example} (keys: {', '.join(RewardParams.keys_known())})",
+        )
         check_terrain_config(self.terrain_config)
         check_int(f"{where}.decimation", self.decimation, minimum=1, hint="physics steps per policy step")
         check_number(f"{where}.action_scale", self.action_scale, minimum=0.0, min_open=True, hint="[rad] per unit")
@@ -324,15 +408,6 @@ class EnvConfig:
             f"{where}.margin_weight", self.margin_weight, minimum=0.0, hint="0: the baseline without the margin term"
         )
         check_optional_path(f"{where}.margin_weights", self.margin_weights)
-        check_number(f"{where}.alive_bonus", self.alive_bonus, minimum=0.0, hint="reward per step while alive")
-        check_number(
-            f"{where}.knee_clearance", self.knee_clearance, minimum=0.0, hint="penalty per m of knee too low, 0: off"
-        )
-        check_number(
-            f"{where}.knee_clearance_height", self.knee_clearance_height, minimum=0.0, hint="[m] above the terrain"
-        )
-        # L is even (L(x) = L(-x)), so only the gain's size matters; 0 would make the velocity term constant.
-        check_number(f"{where}.logistic_gain", self.logistic_gain, minimum=0.0, min_open=True, hint="[s/m]")
         check_number(
             f"{where}.acceleration_filter",
             self.acceleration_filter,
@@ -348,8 +423,23 @@ class EnvConfig:
             )
 
     def replace(self, **changes: object) -> EnvConfig:
-        """A copy with some fields changed (configs are never mutated)."""
+        """A copy with some fields changed (configs are never mutated); a mapping for ``reward_params``
+        changes only the keys it names (``replace(reward_params={"alive_bonus": 0.1})``)."""
+        params = changes.get("reward_params")
+        if isinstance(params, Mapping) and not isinstance(params, RewardParams):
+            changes["reward_params"] = self.reward_params.replace(**params)
         return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def upgrade_stored(cls, data: Mapping[str, Any]) -> dict[str, Any]:
+        """A stored EnvConfig dict in the current layout (:func:`upgrade_stored_env_config`); read by
+        ``margin_rl.train.config.from_dict`` before it builds the config."""
+        return upgrade_stored_env_config(data)
+
+    @classmethod
+    def unknown_field_hint(cls, names: Iterable[str]) -> str:
+        """What to pass instead of unknown field ``names`` that were EnvConfig v0 fields ("" for others)."""
+        return legacy_field_hint(names)
 
     @property
     def reward_weights(self) -> dict[str, float]:
@@ -357,8 +447,66 @@ class EnvConfig:
         weights["margin"] = weights.get("margin", 0.0) * self.margin_weight
         if self.margin == "none":
             weights["margin"] = 0.0
-        if self.alive_bonus:
-            weights["alive"] = weights.get("alive", 0.0) + self.alive_bonus
-        if self.knee_clearance:
-            weights["knee_clearance"] = weights.get("knee_clearance", 0.0) - self.knee_clearance
+        params = self.reward_params
+        if params.alive_bonus:
+            weights["alive"] = weights.get("alive", 0.0) + params.alive_bonus
+        if params.knee_clearance:
+            weights["knee_clearance"] = weights.get("knee_clearance", 0.0) - params.knee_clearance
         return weights
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# configs stored by earlier versions (run directories, policy bundles)
+# ---------------------------------------------------------------------------------------------------------------------
+LEGACY_FIELDS: dict[str, str] = {
+    "alive_bonus": "reward_params",
+    "knee_clearance": "reward_params",
+    "knee_clearance_height": "reward_params",
+    "logistic_gain": "reward_params",
+}
+"""EnvConfig v0 fields (the environment ids ``-v0``) -> the v1 field holding them, under the same key.
+
+v0 kept the reward's added weights and parameters as top-level fields; v1 holds them in one mapping,
+:class:`RewardParams`. Configs stored by v0 (``config.json`` of run directories and of the shipped policy
+bundles) are read through :func:`upgrade_stored_env_config`, the one place they are translated; new code
+and the command line use the v1 spelling (``reward_params={"alive_bonus": 0.1}``, ``--env-option
+reward_params.alive_bonus=0.1``), and the v0 names get an error saying so."""
+
+
+def upgrade_stored_env_config(data: Mapping[str, Any]) -> dict[str, Any]:
+    """A stored EnvConfig dict with the v0 fields of :data:`LEGACY_FIELDS` moved to where v1 keeps them.
+
+    A dict in the current layout is returned unchanged (as a new dict).
+
+    Raises:
+        ValueError: the dict holds a v0 field and a different value for the same key in its v1 place.
+    """
+    upgraded = dict(data)
+    for old, new in LEGACY_FIELDS.items():
+        if old not in upgraded:
+            continue
+        value = upgraded.pop(old)
+        holder = upgraded.get(new)
+        holder = dict(holder) if isinstance(holder, Mapping) else {} if holder is None else holder
+        if not isinstance(holder, dict):
+            raise TypeError(f"env_config.{new} must be a mapping, got {holder!r}")
+        if old in holder and holder[old] != value:
+            raise ValueError(
+                f"env_config holds {old}={value!r} (EnvConfig v0) and {new}.{old}={holder[old]!r} (v1); keep one"
+            )
+        holder.setdefault(old, value)
+        upgraded[new] = holder
+    return upgraded
+
+
+def legacy_field_hint(names: Iterable[str]) -> str:
+    """An empty string, or, for the v0 fields of :data:`LEGACY_FIELDS` among ``names``, how v1 spells them."""
+    moved = [name for name in names if name in LEGACY_FIELDS]
+    if not moved:
+        return ""
+    parts = [f"{name} is now {LEGACY_FIELDS[name]}={{{name!r}: ...}}" for name in moved]
+    first = moved[0]
+    return (
+        f"; EnvConfig v1 (the -v1 ids) keeps the reward weights and parameters in one mapping: {'; '.join(parts)} "
+        f"(command line: --env-option {LEGACY_FIELDS[first]}.{first}=VALUE)"
+    )

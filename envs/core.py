@@ -1,8 +1,10 @@
 """The batched ANYmal simulation behind every environment adapter (single, vector, SB3, rsl-rl).
 
-One :class:`AnymalCore` steps ``num_envs`` MuJoCo simulations with ``mujoco.batch.Batch`` on a native
-thread pool, evaluates the stability margin once per batch per step, and autoresets finished
-environments in the same step (their last observation is returned separately).
+One :class:`AnymalCore` steps ``num_envs`` MuJoCo simulations (through its physics seam,
+:class:`~margin_rl.envs.physics.MujocoBatchPhysics`: ``mujoco.batch.Batch`` on a native thread pool), evaluates
+the stability margin once per batch per step, and autoresets finished environments in the same step (their last
+observation is returned separately). Robot names (bodies, sensors, keyframe, the qpos/qvel layout) come from
+:mod:`margin_rl.robot.mjcf_names`.
 
 :meth:`AnymalCore.step` runs these stages, each a method of its own, once per policy step:
 
@@ -19,20 +21,22 @@ environments in the same step (their last observation is returned separately).
    configured kind (:mod:`margin_rl.envs.margin_kinds`), clipped to :data:`MARGIN_CLIP` (states the
    kind cannot rate get the lower clip); a push enters lambda as f_ext;
 6. ``_track_air_time``: touchdowns and the air time of each foot;
-7. rewards (:mod:`margin_rl.envs.rewards`), ``_terminations`` (base or thigh contact, height or tilt
-   bounds, a diverged simulation) and truncation at the episode length, ``_info``;
+7. rewards (:mod:`margin_rl.envs.rewards`), ``_terminations`` (the named causes of
+   :mod:`margin_rl.envs.terminations`: base or thigh contact, height or tilt bounds, a diverged simulation, each
+   reported as ``info["termination_<cause>"]``) and truncation at the episode length, ``_info``;
 8. observations and the same-step autoreset of finished environments.
+
+A core pickles (and deep-copies): it is rebuilt from its config and terrain, and given back its state (the
+physics' integration state and per-environment model fields, the random generator, commands, filters, pushes,
+episode counters), so that the copy steps to the same numbers as the original.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import os
-from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
-from mujoco import batch as mj_batch
 
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.margin_kinds import make_margin_function
@@ -42,6 +46,7 @@ from margin_rl.envs.observations import (
     PRIVILEGED_OBSERVATIONS,
     assemble,
 )
+from margin_rl.envs.physics import MujocoBatchPhysics
 from margin_rl.envs.rewards import compute_rewards
 from margin_rl.envs.scene import build_model
 from margin_rl.envs.stability_input import (
@@ -50,8 +55,11 @@ from margin_rl.envs.stability_input import (
     stability_state_from_simulation,
     stance_width,
 )
-from margin_rl.envs.terrain import flat_terrain, rough_terrain
+from margin_rl.envs.step_data import Accelerations, SimulationState, StepOutput, check_finite_outputs
+from margin_rl.envs.terminations import any_cause, termination_causes
+from margin_rl.envs.terrain import Terrain, flat_terrain, rough_terrain
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
+from margin_rl.robot import mjcf_names as names
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, StabilityState
 
 __all__ = [
@@ -70,93 +78,15 @@ DIVERGED_SPEED = 1e3
 """A generalised velocity above this (m/s, rad/s) marks a simulation as diverged."""
 
 
-def check_finite_outputs(config: EnvConfig, reward: np.ndarray | float, *observations: np.ndarray) -> None:
-    """FloatingPointError if a reward or an observation is NaN or inf.
-
-    The core keeps diverged simulations finite (and flags them in ``info["diverged"]``); what is left is a
-    setting so large that float arithmetic overflows, which no agent should train on. Checked in the core, so
-    every adapter (Gymnasium, SB3, rsl-rl) gets the same error.
-    """
-    bad_observation = not all(np.all(np.isfinite(o)) for o in observations)
-    if not bad_observation and np.all(np.isfinite(reward)):
-        return
-    rnd = config.randomization
-    raise FloatingPointError(
-        f"the {'observation' if bad_observation else 'reward'} is not finite: an EnvConfig value is too large for "
-        f"float arithmetic (margin_weight={config.margin_weight}, alive_bonus={config.alive_bonus}, "
-        f"randomization.observation_noise={rnd.observation_noise}, reset_velocity_noise={rnd.reset_velocity_noise}); "
-        "use values of the order of the defaults"
-    )
-
-
-def _usable_cores() -> int:
-    """Cores this process may run on (its CPU affinity where the platform reports one)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # macOS, Windows: no affinity API
-        return max(1, os.cpu_count() or 1)
-
-
-@dataclass(frozen=True)
-class SimulationState:
-    """World-frame state of some environments, read from the batch's arrays (N leading)."""
-
-    base_pos: np.ndarray  # (N, 3) [m]
-    base_rot: np.ndarray  # (N, 3, 3) R_WB
-    lin_vel_world: np.ndarray  # (N, 3) base linear velocity [m/s]
-    ang_vel_body: np.ndarray  # (N, 3) base angular velocity, base frame [rad/s]
-    ang_vel_world: np.ndarray  # (N, 3) [rad/s]
-    joint_pos: np.ndarray  # (N, 12) [rad]
-    joint_vel: np.ndarray  # (N, 12) [rad/s]
-    com: np.ndarray  # (N, 3) whole-body CoM [m]
-    com_vel: np.ndarray  # (N, 3) [m/s]
-    feet: np.ndarray  # (N, 4, 3) foot-sphere centres [m]
-    contacts: np.ndarray  # (N, 4) bool, foot-terrain contact
-    base_contact: np.ndarray  # (N,) bool
-    thigh_contacts: np.ndarray  # (N, 4) bool
-    knees: np.ndarray  # (N, 4, 3) knee (KFE joint) positions [m]
-
-    def finite(self) -> SimulationState:
-        """The same state with every non-finite float replaced by 0 (a diverged step's bookkeeping)."""
-        changes = {}
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if value.dtype.kind == "f":
-                changes[f.name] = np.where(np.isfinite(value), value, 0.0)
-        return dataclasses.replace(self, **changes)
-
-
-@dataclass(frozen=True)
-class Accelerations:
-    """Finite-difference accelerations over the policy step (world frame).
-
-    ``com`` and ``base_angular`` are the filtered estimates lambda is built from; ``com_measured`` and
-    ``base_angular_measured`` the unfiltered differences the info reports (what the comparison's base
-    acceleration metrics measure, whatever the filter).
-    """
-
-    com: np.ndarray  # (N, 3) [m/s^2], EMA-filtered (EnvConfig.acceleration_filter)
-    base_angular: np.ndarray  # (N, 3) [rad/s^2], EMA-filtered
-    joints: np.ndarray  # (N, 12) [rad/s^2], unfiltered
-    com_measured: np.ndarray  # (N, 3) [m/s^2], unfiltered
-    base_angular_measured: np.ndarray  # (N, 3) [rad/s^2], unfiltered
-
-
-@dataclass(frozen=True)
-class StepOutput:
-    """Result of :meth:`AnymalCore.step` for all environments."""
-
-    observation: np.ndarray  # (N, obs) float32, after autoreset for finished environments
-    reward: np.ndarray  # (N,) float64
-    terminated: np.ndarray  # (N,) bool
-    truncated: np.ndarray  # (N,) bool
-    info: dict[str, np.ndarray]  # per-environment arrays (reward_<term>, margin, accelerations, ...)
-    final_observation: np.ndarray  # (N, obs): the observation before autoreset (valid where done)
-    privileged: np.ndarray | None  # (N, priv) critic observation, after autoreset
-
-
 class AnymalCore:
     """Batched ANYmal environments (see the module docstring)."""
+
+    _STATE: tuple[str, ...] = (
+        "max_episode_steps", "rng", "mu", "_added_mass", "command", "last_action", "episode_step", "_prev_com_vel",
+        "_prev_ang_vel", "_prev_joint_vel", "_com_acc", "_ang_acc", "_air_time", "_prev_contacts",
+        "_push_steps_left", "_push_force", "_push_applied", "_next_push", "_last_margin", "_last_lambda",
+    )  # fmt: skip
+    """What a pickled core carries besides its config, terrain and physics state (everything a step changes)."""
 
     def __init__(
         self, config: EnvConfig, num_envs: int, seed: int | None = None, autoreset: bool = True, truncate: bool = True
@@ -165,50 +95,15 @@ class AnymalCore:
         end episodes at ``episode_length_s`` (off when a TimeLimit wrapper does it)."""
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
-        self.config = config
-        self.num_envs = num_envs
-        self.autoreset, self.truncate = autoreset, truncate
-        self.robot = load_robot(config.robot)
-        self.terrain = flat_terrain() if config.terrain == "flat" else rough_terrain(config.terrain_config, seed or 0)
-        self.model = build_model(self.robot, self.terrain, config.terrain_config)
-        self.dt = float(self.model.opt.timestep * config.decimation)
-        self.max_episode_steps = round(config.episode_length_s / self.dt)
-        # One MuJoCo thread per core this process may run on: nthread=0 would start one per core of the
-        # machine, so several trainings pinned to a few cores each (taskset, cgroups) would oversubscribe.
-        self.batch = mj_batch.Batch(self.model, nsim=num_envs, nthread=_usable_cores())
-        self._qpos, self._qvel = self.batch.bind("qpos"), self.batch.bind("qvel")
-        self._ctrl, self._xfrc = self.batch.bind("ctrl"), self.batch.bind("xfrc_applied")
-        self._sensors, self._site_xpos = self.batch.bind("sensordata"), self.batch.bind("site_xpos")
-        self._xpos = self.batch.bind("xpos")
-        self._forces = self.batch.bind("actuator_force")
-        self._time = self.batch.bind("time")
-        m = self.model
-        self._base = m.body("base").id
-        self._feet = np.array([m.site(f).id for f in self.robot.foot_names])
-        # The shank body's origin is the knee (KFE) joint, the lower end of the thigh whose contact ends an episode.
-        self._knees = np.array([m.body(f"{leg}_SHANK").id for leg in self.robot.leg_names])
-        self._sensor = {
-            m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i]) for i in range(m.nsensor)
-        }
-        # First entry ("found") of each contact sensor, gathered with one index per step.
-        self._foot_contact_adr = np.array([m.sensor(f"{leg}_foot_contact").adr[0] for leg in self.robot.leg_names])
-        self._thigh_contact_adr = np.array([m.sensor(f"{leg}_THIGH_contact").adr[0] for leg in self.robot.leg_names])
-        self._base_contact_adr = int(m.sensor("base_contact").adr[0])
-        key = m.key("standing").id
-        self._key_qpos, self._key_ctrl = m.key_qpos[key].copy(), m.key_ctrl[key].copy()
-        self._standing_joint_pos = self.robot.standing_joint_pos
-        self._floor = m.geom("floor").id
-        self._friction = self.batch.expand("geom_friction")
-        base_friction = float(m.geom_friction[self._floor, 0])
-        self.mu = np.full(num_envs, base_friction)
-        self._margin_fn = make_margin_function(config.margin, self.robot, config.margin_weights, MARGIN_CLIP[0])
+        terrain = flat_terrain() if config.terrain == "flat" else rough_terrain(config.terrain_config, seed or 0)
+        self._build(config, num_envs, autoreset, truncate, terrain)
         self.rng = np.random.default_rng(seed)
         self._added_mass = np.zeros(num_envs)
         if config.randomization.added_base_mass is not None:
-            masses = self.batch.expand("body_mass")
+            masses = self.physics.per_env_field("body_mass")
             self._added_mass = self.rng.uniform(*config.randomization.added_base_mass, size=num_envs)
-            masses[:, self._base] = m.body_mass[self._base] + self._added_mass
-            self.batch.set_const()
+            masses[:, self._base] = self.physics.body_mass(self._base) + self._added_mass
+            self.physics.set_const()
         n = num_envs
         self.command = np.zeros((n, 3))
         self.last_action = np.zeros((n, 12))
@@ -224,10 +119,90 @@ class AnymalCore:
         self._push_force = np.zeros((n, 3))
         self._push_applied = np.zeros((n, 3))
         self._next_push = np.full(n, np.inf)
-        self.observation_size = sum(t.size for t in POLICY_OBSERVATIONS)
-        self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
         self._last_margin = np.zeros(n)
         self._last_lambda = np.zeros((n, LAMBDA_DIM))
+
+    def _build(self, config: EnvConfig, num_envs: int, autoreset: bool, truncate: bool, terrain: Terrain) -> None:
+        """Everything that follows from the config and the terrain: robot, model, physics, ids, margin."""
+        self.config = config
+        self.num_envs = num_envs
+        self.autoreset, self.truncate = autoreset, truncate
+        self.robot = load_robot(config.robot)
+        self.terrain = terrain
+        self.model = build_model(self.robot, self.terrain, config.terrain_config)
+        self.physics = MujocoBatchPhysics(self.model, num_envs)
+        physics, legs = self.physics, self.robot.leg_names
+        self.dt = float(physics.timestep * config.decimation)
+        self.max_episode_steps = round(config.episode_length_s / self.dt)
+        self._base = physics.body_id(names.BASE_BODY)
+        self._feet = np.array([physics.site_id(f) for f in self.robot.foot_names])
+        # The shank body's origin is the knee (KFE) joint, the lower end of the thigh whose contact ends an episode.
+        self._knees = np.array([physics.body_id(names.shank_body(leg)) for leg in legs])
+        self._com_sensor = physics.sensor_slice(names.COM_SENSOR)
+        self._com_vel_sensor = physics.sensor_slice(names.COM_VELOCITY_SENSOR)
+        # First entry ("found") of each contact sensor, gathered with one index per step.
+        self._foot_contact_adr = np.array([physics.sensor_adr(names.foot_contact_sensor(leg)) for leg in legs])
+        self._thigh_contact_adr = np.array([physics.sensor_adr(names.thigh_contact_sensor(leg)) for leg in legs])
+        self._base_contact_adr = physics.sensor_adr(names.BASE_CONTACT_SENSOR)
+        self._key, self._key_qpos, self._key_ctrl = physics.keyframe(names.STANDING_KEYFRAME)
+        self._standing_joint_pos = self.robot.standing_joint_pos
+        self._floor = physics.geom_id(names.FLOOR_GEOM)
+        self._friction = physics.per_env_field("geom_friction")
+        self.mu = np.full(num_envs, physics.geom_friction(self._floor))
+        self._margin_fn = make_margin_function(config.margin, self.robot, config.margin_weights, MARGIN_CLIP[0])
+        self.observation_size = sum(t.size for t in POLICY_OBSERVATIONS)
+        self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
+
+    # ------------------------------------------------------------------ pickling
+    def __getstate__(self) -> dict[str, Any]:
+        state = {name: getattr(self, name) for name in self._STATE}
+        state["_setup"] = (self.config, self.num_envs, self.autoreset, self.truncate, self.terrain)
+        state["_physics"] = self.physics.get_state()
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state = dict(state)
+        self._build(*state.pop("_setup"))
+        self.physics.set_state(state.pop("_physics"))
+        for name, value in state.items():
+            setattr(self, name, value)
+
+    BUILD_FIELDS: tuple[str, ...] = (
+        "robot", "terrain", "terrain_config", "decimation", "episode_length_s", "margin", "margin_weights"
+    )  # fmt: skip
+    """EnvConfig fields a core is built from (model, time step, episode length, margin model): fixed for its life."""
+
+    def reconfigure(self, config: EnvConfig) -> None:
+        """Use ``config`` from the next step on: the reward, termination bounds, action scale, filter and
+        observation settings at once, the command ranges and randomisation at each environment's next reset.
+
+        Raises:
+            ValueError: ``config`` changes a field of :data:`BUILD_FIELDS` or the added base masses (drawn once,
+                when the core is built): build a new environment instead.
+        """
+        fixed = [name for name in self.BUILD_FIELDS if getattr(config, name) != getattr(self.config, name)]
+        if config.randomization.added_base_mass != self.config.randomization.added_base_mass:
+            fixed.append("randomization.added_base_mass")
+        if fixed:
+            raise ValueError(
+                f"{', '.join(fixed)} cannot change in a running environment (the simulation is built from them); "
+                "make a new environment with the new value instead"
+            )
+        self.config = config
+
+    # MuJoCo-batch internals that analysis scripts read directly (the seam is self.physics).
+    @property
+    def batch(self) -> Any:
+        """The ``mujoco.batch.Batch`` behind :attr:`physics`."""
+        return self.physics.batch
+
+    @property
+    def _ctrl(self) -> np.ndarray:
+        return self.physics.ctrl
+
+    @property
+    def _xfrc(self) -> np.ndarray:
+        return self.physics.xfrc_applied
 
     # ------------------------------------------------------------------ reset
     def reset(self, ids: np.ndarray | None = None, seed: int | None = None) -> None:
@@ -241,23 +216,24 @@ class AnymalCore:
         ids = np.arange(self.num_envs) if ids is None else np.asarray(ids, dtype=np.int64)
         if ids.size == 0:
             return
-        cfg, rnd, rng = self.config, self.config.randomization, self.rng
-        self.batch.reset(ids=ids, keyframe=self.model.key("standing").id, stage=mujoco.mjtStage.mjSTAGE_NONE)
+        cfg, rnd, rng, physics = self.config, self.config.randomization, self.rng, self.physics
+        physics.reset(ids, self._key)
         qpos = np.tile(self._key_qpos, (len(ids), 1))
         spawn = self.terrain.spawn_points[rng.integers(0, len(self.terrain.spawn_points), size=len(ids))]
-        qpos[:, 0:2] = spawn[:, :2]
-        qpos[:, 2] = spawn[:, 2] + self._key_qpos[2] + 0.02
-        qpos[:, 7:] += rng.uniform(-1, 1, size=(len(ids), 12)) * rnd.reset_joint_noise
-        qvel = np.zeros((len(ids), self.model.nv))
-        qvel[:, :6] = rng.uniform(-1, 1, size=(len(ids), 6)) * rnd.reset_velocity_noise
-        self._qpos[ids] = qpos
-        self._qvel[ids] = qvel
-        self._ctrl[ids] = self._key_ctrl
-        self._xfrc[ids] = 0.0
+        base_pos = qpos[:, names.BASE_POSITION_QPOS]  # a view: writes go to qpos
+        base_pos[:, :2] = spawn[:, :2]
+        base_pos[:, 2] = spawn[:, 2] + self._key_qpos[names.BASE_POSITION_QPOS][2] + 0.02  # 2 cm above the ground
+        qpos[:, names.JOINT_QPOS] += rng.uniform(-1, 1, size=(len(ids), 12)) * rnd.reset_joint_noise
+        qvel = np.zeros((len(ids), physics.nv))
+        qvel[:, names.BASE_QVEL] = rng.uniform(-1, 1, size=(len(ids), 6)) * rnd.reset_velocity_noise
+        physics.qpos[ids] = qpos
+        physics.qvel[ids] = qvel
+        physics.ctrl[ids] = self._key_ctrl
+        physics.xfrc_applied[ids] = 0.0
         if rnd.friction is not None:
             self.mu[ids] = rng.uniform(*rnd.friction, size=len(ids))
             self._friction[ids, self._floor, 0] = self.mu[ids]
-        self.batch.forward(ids=ids)
+        physics.forward(ids)
         c = cfg.command
         self.command[ids] = np.column_stack(
             [
@@ -285,23 +261,25 @@ class AnymalCore:
     # ------------------------------------------------------------------ state
     def _read(self, ids: np.ndarray | slice = slice(None)) -> SimulationState:
         """World-frame state of environments ``ids`` from the batch's live arrays."""
-        qpos, qvel, sens = self._qpos[ids], self._qvel[ids], self._sensors[ids]
-        R = quat_wxyz_to_matrix(qpos[:, 3:7])
+        physics = self.physics
+        qpos, qvel, sens = physics.qpos[ids], physics.qvel[ids], physics.sensordata[ids]
+        R = quat_wxyz_to_matrix(qpos[:, names.BASE_QUATERNION_QPOS])
+        ang_vel_body = qvel[:, names.BASE_ANGULAR_VELOCITY_QVEL]
         return SimulationState(
-            base_pos=qpos[:, 0:3],
+            base_pos=qpos[:, names.BASE_POSITION_QPOS],
             base_rot=R,
-            lin_vel_world=qvel[:, 0:3],
-            ang_vel_body=qvel[:, 3:6],
-            ang_vel_world=np.einsum("nij,nj->ni", R, qvel[:, 3:6]),
-            joint_pos=qpos[:, 7:],
-            joint_vel=qvel[:, 6:],
-            com=sens[:, self._sensor["com"]],
-            com_vel=sens[:, self._sensor["com_vel"]],
-            feet=self._site_xpos[ids][:, self._feet],
+            lin_vel_world=qvel[:, names.BASE_LINEAR_VELOCITY_QVEL],
+            ang_vel_body=ang_vel_body,
+            ang_vel_world=np.einsum("nij,nj->ni", R, ang_vel_body),
+            joint_pos=qpos[:, names.JOINT_QPOS],
+            joint_vel=qvel[:, names.JOINT_QVEL],
+            com=sens[:, self._com_sensor],
+            com_vel=sens[:, self._com_vel_sensor],
+            feet=physics.site_xpos[ids][:, self._feet],
             contacts=sens[:, self._foot_contact_adr] > 0,
             base_contact=sens[:, self._base_contact_adr] > 0,
             thigh_contacts=sens[:, self._thigh_contact_adr] > 0,
-            knees=self._xpos[ids][:, self._knees],
+            knees=physics.xpos[ids][:, self._knees],
         )
 
     # ------------------------------------------------------------------ step
@@ -318,7 +296,7 @@ class AnymalCore:
         values = {
             **self._policy_values(state, slice(None)),
             "margin": margin,
-            "torques": self._forces.copy(),
+            "torques": self.physics.actuator_force.copy(),
             "action": action,
             "last_action": self.last_action,
             "joint_acc": acc.joints,
@@ -329,12 +307,13 @@ class AnymalCore:
         weights = cfg.reward_weights
         if "knee_clearance" in weights:  # a terrain lookup per knee: only when the term is on
             values["knee_heights"] = state.knees[..., 2] - self.terrain.height(state.knees[..., :2])
-            values["knee_clearance_height"] = np.full(self.num_envs, cfg.knee_clearance_height)
-        reward, terms = compute_rewards(weights, values, cfg.logistic_gain)
+            values["knee_clearance_height"] = np.full(self.num_envs, cfg.reward_params.knee_clearance_height)
+        reward, terms = compute_rewards(weights, values, cfg.reward_params.logistic_gain)
         self.last_action = action.copy()
-        terminated = self._terminations(state, diverged)
+        causes = self._terminations(state, diverged)
+        terminated = any_cause(causes)
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
-        info = self._info(state, acc, values, terms, margin, stability, terminated, diverged)
+        info = self._info(state, acc, values, terms, margin, stability, terminated, diverged, causes)
         observation = self._observe(values)
         final_observation = observation.copy()
         done = terminated | truncated
@@ -354,13 +333,13 @@ class AnymalCore:
         if not np.all(np.isfinite(a)):
             raise ValueError("actions contain NaN or inf")
         a = np.clip(a, -1.0, 1.0)
-        self._ctrl[:] = self._key_ctrl + self.config.action_scale * a
+        self.physics.ctrl[:] = self._key_ctrl + self.config.action_scale * a
         self._apply_pushes()
         return a
 
     def _invalid_state(self) -> np.ndarray:
         """(N,) True where qpos or qvel is non-finite or a velocity exceeds :data:`DIVERGED_SPEED`."""
-        qpos, qvel = self._qpos, self._qvel
+        qpos, qvel = self.physics.qpos, self.physics.qvel
         return (
             ~np.all(np.isfinite(qvel), axis=1)
             | np.any(np.abs(qvel) > DIVERGED_SPEED, axis=1)
@@ -374,14 +353,13 @@ class AnymalCore:
         a simulation whose accelerations blow up (a "bad QACC" warning) instead of raising; its clock then fails
         to advance by the step, which is how such a divergence is caught here.
         """
+        physics = self.physics
         diverged = self._invalid_state()
-        time_before = self._time.copy()
-        try:
-            self.batch.step(nstep=self.config.decimation, stage=mujoco.mjtStage.mjSTAGE_ACC)
-        except mj_batch.SimulationError as exc:  # a simulation failed: end its episode, keep the others
-            diverged[np.asarray(exc.ids, dtype=np.int64)] = True
-        expected = time_before + self.config.decimation * self.model.opt.timestep
-        diverged |= np.abs(self._time - expected) > 0.5 * self.model.opt.timestep
+        time_before = physics.time.copy()
+        failed = physics.step(self.config.decimation)
+        diverged[failed] = True  # a simulation failed: end its episode, keep the others
+        expected = time_before + self.config.decimation * physics.timestep
+        diverged |= np.abs(physics.time - expected) > 0.5 * physics.timestep
         return diverged | self._invalid_state()
 
     def _measure(self, diverged: np.ndarray) -> SimulationState:
@@ -434,18 +412,16 @@ class AnymalCore:
         self._prev_contacts = contacts.copy()
         return touchdown, air_at_touchdown
 
-    def _terminations(self, state: SimulationState, diverged: np.ndarray) -> np.ndarray:
-        """(N,) base or thigh contact with the terrain, base too low or too tilted, or a diverged simulation."""
-        bounds = self.config.termination
-        ground = self.terrain.height(state.base_pos[:, :2])
-        tilt_cos = state.base_rot[:, 2, 2]
-        return (
-            state.base_contact
-            | state.thigh_contacts.any(axis=1)
-            | (state.base_pos[:, 2] - ground < bounds.min_base_height)
-            | (tilt_cos < np.cos(bounds.max_tilt_rad))
-            | diverged
-        )
+    def _terminations(self, state: SimulationState, diverged: np.ndarray) -> dict[str, np.ndarray]:
+        """(N,) flags of each cause of :mod:`margin_rl.envs.terminations` (OR'ed, they are ``terminated``)."""
+        inputs = {
+            "base_contact": state.base_contact,
+            "thigh_contacts": state.thigh_contacts,
+            "base_height": state.base_pos[:, 2] - self.terrain.height(state.base_pos[:, :2]),
+            "tilt_cos": state.base_rot[:, 2, 2],
+            "diverged": diverged,
+        }
+        return termination_causes(inputs, self.config.termination)
 
     def _info(
         self,
@@ -457,6 +433,7 @@ class AnymalCore:
         stability: StabilityState,
         terminated: np.ndarray,
         diverged: np.ndarray,
+        causes: dict[str, np.ndarray],
     ) -> dict[str, np.ndarray]:
         """The per-environment step info (every weighted reward term, margin, accelerations, gait, flags)."""
         R = state.base_rot
@@ -473,6 +450,7 @@ class AnymalCore:
             "lambda": self._last_lambda,  # (N, 47), the margin's input (names: stability.lambda_names())
             "fell": (terminated & ~diverged).astype(np.float64),
             "diverged": diverged.astype(np.float64),
+            **{f"termination_{name}": flags.astype(np.float64) for name, flags in causes.items()},
         }
 
     def push(self, ids: np.ndarray, force: np.ndarray, duration_s: float, frame: str = "world") -> None:
@@ -508,13 +486,14 @@ class AnymalCore:
     def _apply_pushes(self) -> None:
         """Write the running pushes (random ones of :class:`RandomizationConfig`, and :meth:`push`) to the base."""
         rnd = self.config.randomization
-        self._xfrc[:, self._base, :] = 0.0
+        xfrc = self.physics.xfrc_applied
+        xfrc[:, self._base, :] = 0.0
         if rnd.push_interval_s is not None:
             self._start_random_pushes(rnd)
         active = self._push_steps_left > 0
         # The force of this step, kept for lambda: the counter below already reads 0 during a push's last step.
         self._push_applied = np.where(active[:, None], self._push_force, 0.0)
-        self._xfrc[active, self._base, :3] = self._push_force[active]
+        xfrc[active, self._base, :3] = self._push_force[active]
         self._push_steps_left = np.maximum(self._push_steps_left - 1, 0)
 
     def _start_random_pushes(self, rnd: RandomizationConfig) -> None:
@@ -552,13 +531,17 @@ class AnymalCore:
 
     def observe_all(self) -> np.ndarray:
         """Policy observations of every environment (after :meth:`reset`)."""
-        observations = self._observe_ids(np.arange(self.num_envs))
+        return self.observe(np.arange(self.num_envs))
+
+    def observe(self, ids: np.ndarray) -> np.ndarray:
+        """Policy observations (len(ids), obs) of environments ``ids`` (e.g. just reset)."""
+        observations = self._observe_ids(np.asarray(ids, dtype=np.int64))
         check_finite_outputs(self.config, 0.0, observations)
         return observations
 
     def privileged_observation(self) -> np.ndarray:
         """Critic group: terrain heights around the feet, friction and the current margin."""
-        feet = self._site_xpos[:, self._feet]
+        feet = self.physics.site_xpos[:, self._feet]
         offsets = np.array(FOOT_HEIGHT_OFFSETS)
         points = feet[:, :, None, :2] + offsets[None, None]
         heights = feet[:, :, None, 2] - self.terrain.height(points)
@@ -576,8 +559,4 @@ class AnymalCore:
 
     def render_data(self, env: int = 0) -> mujoco.MjData:
         """An MjData with environment ``env``'s current state (for rendering)."""
-        data = mujoco.MjData(self.model)
-        data.qpos[:] = self._qpos[env]
-        data.qvel[:] = self._qvel[env]
-        mujoco.mj_forward(self.model, data)
-        return data
+        return self.physics.render_data(env)

@@ -8,14 +8,15 @@ import mujoco
 
 from margin_rl.envs.terrain import Terrain, TerrainConfig
 from margin_rl.robot import Robot
+from margin_rl.robot.mjcf_names import FLOOR_GEOM
 
 
 def build_model(robot: Robot, terrain: Terrain, terrain_config: TerrainConfig) -> mujoco.MjModel:
     """The robot on its terrain: the flat scene file, or the robot plus a heightfield of ``terrain``.
 
     The heightfield spans the terrain's grid centred on the world origin; its top is
-    ``terrain_config.max_height`` [m] and the floor geom keeps the name ``floor`` (friction 1.0) in both
-    cases, so the environment finds it by name.
+    ``terrain_config.max_height`` [m] and the floor geom keeps the name :data:`~margin_rl.robot.mjcf_names.FLOOR_GEOM`
+    (``floor``, friction 1.0) in both cases (the flat scene files name it so), so the environment finds it by name.
     """
     if terrain.is_flat:
         return mujoco.MjModel.from_xml_path(str(robot.scene_path))
@@ -35,7 +36,7 @@ def build_model(robot: Robot, terrain: Terrain, terrain_config: TerrainConfig) -
   </asset>
   <worldbody>
     <light pos="0 0 5" dir="0 0 -1" directional="true"/>
-    <geom name="floor" type="hfield" hfield="terrain" material="grid" contype="1" conaffinity="1" condim="3"
+    <geom name="{FLOOR_GEOM}" type="hfield" hfield="terrain" material="grid" contype="1" conaffinity="1" condim="3"
           friction="1.0 0.005 0.0001" priority="1"/>
   </worldbody>
 </mujoco>"""

@@ -64,7 +64,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from margin_rl.slip.dynamics import HopResult, SlipParams, Status, simulate_hop
 from margin_rl.slip.margin import BOX_HIGH, BOX_LOW
-from margin_rl.slip.models import BUNDLE_DIR, MLP, load_bundle
+from margin_rl.slip.models import BUNDLE_DIR, load_bundle
 
 __all__ = [
     "ACTION_HIGH",
@@ -182,7 +182,7 @@ class SlipHopperEnv(gymnasium.Env):
         self.failure_reward = float(failure_reward)
         self.terminate_out_of_box = bool(terminate_out_of_box)
         self.params = params if params is not None else SlipParams()
-        self.margin_model: MLP = load_bundle(BUNDLE_DIR if margin_bundle is None else margin_bundle).margin
+        self.margin_model = load_bundle(BUNDLE_DIR if margin_bundle is None else margin_bundle).margin
         self.render_mode, self.width, self.height = render_mode, int(width), int(height)
 
         self.action_space = spaces.Box(-1.0, 1.0, (2,), np.float32)

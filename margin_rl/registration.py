@@ -2,12 +2,17 @@
 
 ``import margin_rl`` calls :func:`register_envs`; Gymnasium imports an environment's module the first time
 it is made (the entry points are strings), so the package root stays below the environment layer. In a
-fresh interpreter without ``import margin_rl``, ``gymnasium.make("margin_rl:margin_rl/AnymalB-v0")`` imports
+fresh interpreter without ``import margin_rl``, ``gymnasium.make("margin_rl:margin_rl/AnymalB-v1")`` imports
 the package through Gymnasium's ``module:id`` syntax (Gymnasium 1.x has no plugin entry points).
 
-Ids: ``margin_rl/AnymalB-v0``, ``margin_rl/AnymalC-v0`` (flat ground), ``margin_rl/AnymalB-Rough-v0``,
-``margin_rl/AnymalC-Rough-v0`` (rough terrain), each with a native batched vector entry point for
+Ids: ``margin_rl/AnymalB-v1``, ``margin_rl/AnymalC-v1`` (flat ground), ``margin_rl/AnymalB-Rough-v1``,
+``margin_rl/AnymalC-Rough-v1`` (rough terrain), each with a native batched vector entry point for
 ``gymnasium.make_vec``; ``margin_rl/SLIPHopper-v0`` (seed 001's actuated SLIP hopper, one hop per step).
+
+The ANYmal ids ``-v0`` are not registered any more (the version history is in :mod:`margin_rl.envs.anymal`):
+``gymnasium.make`` of one raises Gymnasium's own ``gymnasium.error.DeprecatedEnv`` naming the ``-v1`` id.
+Stored runs and policy bundles that name a ``-v0`` id are read as its ``-v1`` id (the dynamics are the same):
+:func:`current_env_id`, with the table :data:`LEGACY_ANYMAL_IDS`, is the one place that translation happens.
 """
 
 from __future__ import annotations
@@ -21,16 +26,25 @@ episodes at their config's ``episode_length_s`` themselves, so a changed length 
 registered TimeLimit."""
 
 ANYMAL_ENV_IDS: dict[str, dict[str, str]] = {
-    "margin_rl/AnymalB-v0": {"robot": "anymal_b", "terrain": "flat"},
-    "margin_rl/AnymalC-v0": {"robot": "anymal_c", "terrain": "flat"},
-    "margin_rl/AnymalB-Rough-v0": {"robot": "anymal_b", "terrain": "rough"},
-    "margin_rl/AnymalC-Rough-v0": {"robot": "anymal_c", "terrain": "rough"},
+    "margin_rl/AnymalB-v1": {"robot": "anymal_b", "terrain": "flat"},
+    "margin_rl/AnymalC-v1": {"robot": "anymal_c", "terrain": "flat"},
+    "margin_rl/AnymalB-Rough-v1": {"robot": "anymal_b", "terrain": "rough"},
+    "margin_rl/AnymalC-Rough-v1": {"robot": "anymal_c", "terrain": "rough"},
 }
 """ANYmal ids and the constructor keywords that make each one."""
+
+LEGACY_ANYMAL_IDS: dict[str, str] = {env_id.replace("-v1", "-v0"): env_id for env_id in ANYMAL_ENV_IDS}
+"""Retired ANYmal ids -> the id that replaced them with the same dynamics (read by :func:`current_env_id`)."""
 
 SLIP_HOPPER_ENV_ID = "margin_rl/SLIPHopper-v0"
 SLIP_HOPPER_EPISODE_HOPS = 50
 """Episode length of ``margin_rl/SLIPHopper-v0`` in hops (one step = one apex-to-apex hop)."""
+
+
+def current_env_id(env_id: str) -> str:
+    """The registered id for ``env_id``: a retired ANYmal ``-v0`` id becomes its ``-v1`` id, any other id is
+    returned unchanged. For ids read from stored runs and bundles (and the training commands' ``--env``)."""
+    return LEGACY_ANYMAL_IDS.get(env_id, env_id)
 
 
 def register_envs() -> None:

@@ -9,7 +9,10 @@ SB3's PPO has no KL-adaptive learning rate; its closest equivalent here is the s
 ``target_kl`` early stopping of the epochs (documented difference, see :class:`Sb3PPOConfig`).
 
 Both configs, and the environment's :class:`~margin_rl.envs.config.EnvConfig`, are written as JSON into every
-run directory; :func:`from_dict` rebuilds them (nested dataclasses, tuples, optionals) for ``--resume``.
+run directory; :func:`from_dict` rebuilds them (nested dataclasses, tuples, optionals) for ``--resume``. A config
+class may translate dicts stored by its earlier versions (a classmethod ``upgrade_stored(data) -> dict``, as
+``EnvConfig`` has for its v0 fields) and name what replaced an unknown field (a classmethod
+``unknown_field_hint(names) -> str``).
 """
 
 from __future__ import annotations
@@ -250,13 +253,24 @@ def _coerce(hint: Any, value: Any, where: str) -> Any:
     return value
 
 
+def _unknown_hint(cls: type, unknown: list[str]) -> str:
+    hint = getattr(cls, "unknown_field_hint", None)
+    return hint(unknown) if hint is not None else ""
+
+
 def from_dict(cls: type, data: dict[str, Any], where: str = "") -> Any:
-    """Rebuild a (nested) frozen config dataclass from :func:`to_dict` output; unknown keys raise."""
+    """Rebuild a (nested) frozen config dataclass from :func:`to_dict` output (or a dict stored by an earlier
+    version of ``cls``, through its ``upgrade_stored``); unknown keys raise."""
+    upgrade = getattr(cls, "upgrade_stored", None)
+    if upgrade is not None and isinstance(data, dict):
+        data = upgrade(data)
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}
-    unknown = set(data) - names
+    unknown = sorted(set(data) - names)
     if unknown:
-        raise TypeError(f"{where or cls.__name__}: unknown option(s) {sorted(unknown)}; known: {sorted(names)}")
+        raise TypeError(
+            f"{where or cls.__name__}: unknown option(s) {unknown}; known: {sorted(names)}{_unknown_hint(cls, unknown)}"
+        )
     kwargs = {k: _coerce(hints[k], v, f"{where or cls.__name__}.{k}") for k, v in data.items()}
     return cls(**kwargs)
 
@@ -269,7 +283,10 @@ def apply_overrides(config: Any, overrides: dict[str, Any]) -> Any:
     merged: dict[str, Any] = {}
     for key, value in overrides.items():
         if key not in current:
-            raise TypeError(f"{type(config).__name__}: unknown option {key!r}; known: {sorted(current)}")
+            raise TypeError(
+                f"{type(config).__name__}: unknown option {key!r}; known: {sorted(current)}"
+                f"{_unknown_hint(type(config), [key])}"
+            )
         old = current[key]
         if dataclasses.is_dataclass(old) and isinstance(value, dict):
             value = {**to_dict(old), **value}
@@ -279,14 +296,31 @@ def apply_overrides(config: Any, overrides: dict[str, Any]) -> Any:
 
 
 def parse_assignments(items: list[str] | None, what: str) -> dict[str, Any]:
-    """``["key=value", ...]`` from the command line; values are JSON where they parse, else strings."""
+    """``["key=value", ...]`` from the command line; values are JSON where they parse, else strings.
+
+    A dotted key sets one entry of a mapping field: ``reward_params.alive_bonus=0.1`` gives
+    ``{"reward_params": {"alive_bonus": 0.1}}``, merged with other entries given for the same field (its other
+    entries keep their values, see :func:`apply_overrides`).
+    """
     result: dict[str, Any] = {}
     for item in items or []:
         key, sep, text = item.partition("=")
+        key = key.strip()
         if not sep or not key:
             raise ValueError(f"{what} must look like KEY=VALUE, got {item!r}")
         try:
-            result[key.strip()] = json.loads(text)
+            value = json.loads(text)
         except json.JSONDecodeError:
-            result[key.strip()] = text
+            value = text
+        field_name, dot, entry = key.partition(".")
+        if not dot:
+            both_mappings = isinstance(result.get(key), dict) and isinstance(value, dict)
+            result[key] = {**result[key], **value} if both_mappings else value
+            continue
+        if not field_name or not entry or "." in entry:
+            raise ValueError(f"{what}: a dotted KEY must be FIELD.ENTRY (e.g. reward_params.alive_bonus), got {key!r}")
+        holder = result.setdefault(field_name, {})
+        if not isinstance(holder, dict):
+            raise ValueError(f"{what}: {field_name} is given as {holder!r} and as {key}=...; give one of them")
+        holder[entry] = value
     return result

@@ -6,6 +6,9 @@ simulation, :class:`margin_rl.envs.core.AnymalCore`, configured by an :class:`~m
 ``gymnasium.make(id, **env_kwargs)``, SB3 only: :class:`GymTarget`. :func:`env_target` picks the kind from the
 id's registration; :func:`margin_rl.train.commands.train.make_spec`, ``evaluate`` and the backends work on the target.
 
+Ids are looked up through :func:`margin_rl.registration.current_env_id`: a retired ANYmal ``-v0`` id (stored in
+older run directories and policy bundles) is read as its ``-v1`` id, which has the same dynamics.
+
 Generic environment keywords are checked against the constructor's (:func:`env_kwargs_for`) and must be JSON,
 since the run's ``config.json`` stores them for ``--resume`` and ``evaluate``. The generic path trains
 continuous control: flat ``Box`` observations and ``Box`` actions (:func:`check_gym_env`).
@@ -27,10 +30,11 @@ from gymnasium import spaces
 from margin_rl.envs.anymal import make_config
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.core import AnymalCore
+from margin_rl.registration import current_env_id
 from margin_rl.stability.learned.model import LearnedMargin, WeightsError
 from margin_rl.train.config import apply_overrides, to_dict
 
-DEFAULT_ENV = "margin_rl/AnymalB-v0"
+DEFAULT_ENV = "margin_rl/AnymalB-v1"
 ACTION_SIZE = 12
 VECTOR_ENTRY_POINT = "margin_rl.envs.vector:AnymalVectorEnv"
 NAMESPACE = "margin_rl/"
@@ -53,13 +57,13 @@ def margin_rl_ids() -> list[str]:
 
 
 def registered_spec(env_id: str) -> gymnasium.envs.registration.EnvSpec:
-    """Gymnasium's registration of ``env_id``.
+    """Gymnasium's registration of ``env_id`` (of its ``-v1`` id for a retired ANYmal ``-v0`` one).
 
     Raises:
         ValueError: the id is not registered (the message lists the margin_rl ids).
     """
     try:
-        return gymnasium.spec(env_id)
+        return gymnasium.spec(current_env_id(env_id))
     except gymnasium.error.Error as exc:
         raise ValueError(
             f"unknown environment id {env_id!r}; margin_rl ids: {', '.join(margin_rl_ids())} "
@@ -315,6 +319,7 @@ def env_target(env_id: str, overrides: Mapping[str, Any] | None = None) -> EnvTa
         ValueError: unknown id. TypeError: unknown option names or badly typed values.
     """
     if is_batched_anymal(env_id):
+        env_id = current_env_id(env_id)  # a new run records the current id
         return AnymalTarget(env_id, env_config_for(env_id, dict(overrides or {})))
     return GymTarget(env_id, env_kwargs_for(env_id, overrides))
 
@@ -336,7 +341,7 @@ def anymal_config(env_id: str, options: Mapping[str, Any], caller: str, instead:
     unknown = sorted(set(options) - set(fields))
     if unknown:
         raise TypeError(f"{caller}: unknown environment option(s) {unknown} for {env_id}; the options are the "
-                        f"EnvConfig fields: {', '.join(fields)}")  # fmt: skip
+                        f"EnvConfig fields: {', '.join(fields)}{EnvConfig.unknown_field_hint(unknown)}")  # fmt: skip
     config = env_config_for(env_id, dict(options))
     check_margin_available(config)
     return config

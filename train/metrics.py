@@ -17,8 +17,13 @@ every episode that ends. Metric names and units:
 ``forward_velocity_mean``        mean heading velocity ẋ in the base frame [m/s]
 ``stance_width_mean``            mean lateral foot spread in the heading frame [m]
 ``fell``, ``diverged``           1 if the episode ended in a fall / a diverged simulation, else 0
+``termination/<cause>``          1 if the cause held on the episode's last step (``info["termination_<cause>"]``;
+                                 the causes of :mod:`margin_rl.envs.terminations`, several may hold at once)
 ``timed_out``                    1 if the episode reached its time limit
 ===============================  ==========================================================================
+
+Averaged over episodes (as :func:`summarize` and the training logs do), ``termination/<cause>`` is the fraction
+of episodes that cause ended; TensorBoard shows it as ``Episode_Termination/<cause>`` (:func:`tensorboard_tags`).
 
 Acceleration statistics skip the first ``warmup_steps`` of each episode (the landing after a reset) when
 asked to; training logs use every step. An episode that ends within the warm-up has no acceleration sample
@@ -36,6 +41,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
+
+from margin_rl.envs.terminations import CAUSE_NAMES
 
 AXES: tuple[str, ...] = ("x", "y", "z")
 TERMINATION_KEYS: tuple[str, ...] = ("fell", "diverged", "timed_out")
@@ -179,6 +186,9 @@ class EpisodeStatistics:
         metrics["stance_width_mean"] = self._stance[ids] / length
         metrics["fell"] = np.asarray(info["fell"], dtype=float)[ids]
         metrics["diverged"] = np.asarray(info["diverged"], dtype=float)[ids]
+        for cause in CAUSE_NAMES:
+            if f"termination_{cause}" in info:
+                metrics[f"termination/{cause}"] = np.asarray(info[f"termination_{cause}"], dtype=float)[ids]
         metrics["timed_out"] = truncated[ids].astype(float)
         return metrics
 
@@ -277,7 +287,9 @@ def split_episodes(metrics: Mapping[str, np.ndarray]) -> list[dict[str, float]]:
 
 def tensorboard_tags(metrics: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Episode metrics under their TensorBoard tags (the same for both backends):
-    ``Episode_Reward/<term>``, ``Episode_Termination/<fell|diverged|timed_out>``, ``Episode_Metrics/<name>``."""
+    ``Episode_Reward/<term>``, ``Episode_Termination/<fell|diverged|timed_out>``,
+    ``Episode_Termination/<cause>`` (each termination cause; ``diverged`` is both a cause and a key, with the same
+    values), ``Episode_Metrics/<name>``."""
     tags: dict[str, np.ndarray] = {}
     for key, value in metrics.items():
         if key == "env":
@@ -286,6 +298,8 @@ def tensorboard_tags(metrics: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]
             tags[f"Episode_Reward/{key.removeprefix('reward/')}"] = value
         elif key in TERMINATION_KEYS:
             tags[f"Episode_Termination/{key}"] = value
+        elif key.startswith("termination/"):
+            tags.setdefault(f"Episode_Termination/{key.removeprefix('termination/')}", value)
         else:
             tags[f"Episode_Metrics/{key}"] = value
     return tags

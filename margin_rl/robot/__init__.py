@@ -11,6 +11,7 @@ Modules (every public name is re-exported here)::
     model        Robot, load_robot, load_robot_from_xml, available_robots, the MJCF checks, standing ctrl
     kinematics   closed-form leg kinematics, the analytic IK and its tables (Robot's kinematics methods)
     dynamics     Pinocchio: leg Jacobians, bias torques, centroidal momentum rate (Robot's dynamics methods)
+    mjcf_names   the names the environments read the MJCF by (bodies, sensors, keyframe, floor, qpos/qvel slices)
     cli          margin-rl-robots / python -m margin_rl: the robots' report
 
 Conventions
@@ -25,6 +26,7 @@ Conventions
 
 from __future__ import annotations
 
+from margin_rl.robot import mjcf_names
 from margin_rl.robot.cli import format_report, main
 from margin_rl.robot.dynamics import RigidBodyDynamics
 from margin_rl.robot.kinematics import (
@@ -70,6 +72,7 @@ __all__ = [
     "load_robot",
     "load_robot_from_xml",
     "main",
+    "mjcf_names",
     "quat_wxyz_to_matrix",
     "robot_xml_path",
     "scene_xml_path",

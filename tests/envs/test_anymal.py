@@ -16,6 +16,7 @@ from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore, heading_rotation, lambda_from_simulation
 from margin_rl.envs.observations import POLICY_OBSERVATIONS, observation_size
 from margin_rl.robot import quat_wxyz_to_matrix
+from margin_rl.robot.mjcf_names import BASE_QUATERNION_QPOS, JOINT_QVEL
 from margin_rl.stability.analytic.lambda_state import from_lambda
 from tests.stability.learned.test_model import random_weights
 
@@ -41,7 +42,7 @@ def test_check_env_on_every_id(env_id: str, toy_weights: str) -> None:
 
 
 def test_reward_is_the_sum_of_the_terms(toy_weights: str) -> None:
-    env = gym.make("margin_rl/AnymalB-v0", reward_preset="shaped", margin_weights=toy_weights)
+    env = gym.make("margin_rl/AnymalB-v1", reward_preset="shaped", margin_weights=toy_weights)
     env.reset(seed=1)
     rng = np.random.default_rng(1)
     for _ in range(100):
@@ -56,7 +57,7 @@ def test_reward_is_the_sum_of_the_terms(toy_weights: str) -> None:
 
 
 def test_paper_preset_has_exactly_two_terms(toy_weights: str) -> None:
-    env = gym.make("margin_rl/AnymalC-v0", margin_weights=toy_weights, margin_weight=0.3)
+    env = gym.make("margin_rl/AnymalC-v1", margin_weights=toy_weights, margin_weight=0.3)
     env.reset(seed=0)
     _, _reward, _, _, info = env.step(np.zeros(12))
     terms = {k: v for k, v in info.items() if k.startswith("reward_")}
@@ -71,20 +72,22 @@ def test_paper_preset_has_exactly_two_terms(toy_weights: str) -> None:
 def test_alive_bonus_adds_a_constant_per_step_and_rejects_bad_values(toy_weights: str) -> None:
     rewards = {}
     for bonus in (0.0, 0.2):
-        env = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, margin_weight=0.3, alive_bonus=bonus)
+        env = gym.make(
+            "margin_rl/AnymalB-v1", margin_weights=toy_weights, margin_weight=0.3, reward_params={"alive_bonus": bonus}
+        )
         env.reset(seed=4)
         _, rewards[bonus], _, _, info = env.step(np.full(12, 0.1))
     assert info["reward_alive"] == pytest.approx(0.2)
     assert rewards[0.2] - rewards[0.0] == pytest.approx(0.2, abs=1e-9)  # same seed, same step: only the bonus
     for bad in (-0.1, float("nan")):
         with pytest.raises(ValueError, match="alive_bonus"):
-            gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, alive_bonus=bad)
+            gym.make("margin_rl/AnymalB-v1", margin_weights=toy_weights, reward_params={"alive_bonus": bad})
 
 
 def test_same_seed_same_rollout(toy_weights: str) -> None:
     def rollout(seed: int) -> np.ndarray:
         env = gym.make(
-            "margin_rl/AnymalC-v0",
+            "margin_rl/AnymalC-v1",
             margin_weights=toy_weights,
             randomization=RandomizationConfig(observation_noise=1.0, friction=(0.4, 1.0)),
         )
@@ -102,13 +105,13 @@ def test_same_seed_same_rollout(toy_weights: str) -> None:
 def test_batched_env_equals_single_envs_step_for_step(toy_weights: str) -> None:
     n = 3
     vec = gym.make_vec(
-        "margin_rl/AnymalB-v0",
+        "margin_rl/AnymalB-v1",
         num_envs=n,
         vectorization_mode="vector_entry_point",
         margin_weights=toy_weights,
         randomization=NO_NOISE,
     )
-    singles = [gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE) for _ in range(n)]
+    singles = [gym.make("margin_rl/AnymalB-v1", margin_weights=toy_weights, randomization=NO_NOISE) for _ in range(n)]
     obs_v, _ = vec.reset(seed=0)
     obs_s = [env.reset(seed=0)[0] for env in singles]
     np.testing.assert_array_equal(obs_v, np.array(obs_s))
@@ -166,7 +169,7 @@ def test_lambda_from_a_known_state_matches_a_hand_computation() -> None:
 
 
 def test_standing_robot_has_a_positive_analytic_margin() -> None:
-    env = gym.make("margin_rl/AnymalC-v0", margin="analytic", randomization=NO_NOISE)
+    env = gym.make("margin_rl/AnymalC-v1", margin="analytic", randomization=NO_NOISE)
     env.reset(seed=0)
     for _ in range(50):  # 1 s: the robot settles from its 2 cm spawn drop
         _, _, terminated, _, info = env.step(np.zeros(12))
@@ -180,8 +183,8 @@ def test_standing_robot_has_a_positive_analytic_margin() -> None:
 
 
 def test_actions_nan_raise_and_out_of_range_are_clipped(toy_weights: str) -> None:
-    env_a = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE)
-    env_b = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE)
+    env_a = gym.make("margin_rl/AnymalB-v1", margin_weights=toy_weights, randomization=NO_NOISE)
+    env_b = gym.make("margin_rl/AnymalB-v1", margin_weights=toy_weights, randomization=NO_NOISE)
     env_a.reset(seed=0)
     env_b.reset(seed=0)
     with pytest.raises(ValueError, match="NaN"):
@@ -191,17 +194,21 @@ def test_actions_nan_raise_and_out_of_range_are_clipped(toy_weights: str) -> Non
 
 
 def test_diverging_simulation_terminates_with_a_flag(toy_weights: str) -> None:
-    env = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights)
+    env = gym.make("margin_rl/AnymalB-v1", margin_weights=toy_weights)
     env.reset(seed=0)
     core: AnymalCore = env.unwrapped.core
-    core._qvel[0, 6:] = 1e9  # an exploding state
+    core.physics.qvel[0, JOINT_QVEL] = 1e9  # an exploding state
     _, reward, terminated, _, info = env.step(np.zeros(12))
     assert terminated and info["diverged"] == 1.0 and np.isfinite(reward)
 
 
 def test_vector_env_same_step_autoreset(toy_weights: str) -> None:
     vec = gym.make_vec(
-        "margin_rl/AnymalB-v0", num_envs=4, vectorization_mode="vector_entry_point", margin_weights=toy_weights
+        "margin_rl/AnymalB-v1",
+        num_envs=4,
+        vectorization_mode="vector_entry_point",
+        margin_weights=toy_weights,
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
     assert vec.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
     vec.unwrapped.core.max_episode_steps = 3
@@ -218,7 +225,7 @@ def test_vector_env_same_step_autoreset(toy_weights: str) -> None:
 
 def test_privileged_observation_and_structure(toy_weights: str) -> None:
     vec = gym.make_vec(
-        "margin_rl/AnymalC-Rough-v0",
+        "margin_rl/AnymalC-Rough-v1",
         num_envs=2,
         vectorization_mode="vector_entry_point",
         margin_weights=toy_weights,
@@ -249,9 +256,9 @@ def test_rough_terrain_heights_match_mujoco_collision_geometry() -> None:
 
 def test_unknown_option_is_named() -> None:
     with pytest.raises(TypeError, match="unknown environment options"):
-        gym.make("margin_rl/AnymalB-v0", margin_wieght=1.0)
+        gym.make("margin_rl/AnymalB-v1", margin_wieght=1.0)
     with pytest.raises(ValueError, match="margin must be"):
-        gym.make("margin_rl/AnymalB-v0", margin="magic")
+        gym.make("margin_rl/AnymalB-v1", margin="magic")
 
 
 def test_env_ids_are_registered_on_import() -> None:
@@ -262,7 +269,7 @@ def test_env_ids_are_registered_on_import() -> None:
 
 def test_rgb_render(toy_weights: str, tmp_path: Path) -> None:
     pytest.importorskip("mujoco")
-    env = gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, render_mode="rgb_array", width=64, height=48)
+    env = gym.make("margin_rl/AnymalB-v1", margin_weights=toy_weights, render_mode="rgb_array", width=64, height=48)
     env.reset(seed=0)
     try:
         frame = env.render()
@@ -272,7 +279,7 @@ def test_rgb_render(toy_weights: str, tmp_path: Path) -> None:
 
 
 def test_fwp_factor_as_the_margin_term() -> None:
-    env = gym.make("margin_rl/AnymalC-v0", margin="fwp", randomization=NO_NOISE)
+    env = gym.make("margin_rl/AnymalC-v1", margin="fwp", randomization=NO_NOISE)
     env.reset(seed=0)
     for _ in range(20):
         info = env.step(np.zeros(12))[4]
@@ -281,9 +288,9 @@ def test_fwp_factor_as_the_margin_term() -> None:
 
 
 def test_diverged_state_does_not_crash_the_analytic_margin_mode() -> None:
-    env = gym.make("margin_rl/AnymalB-v0", margin="analytic")
+    env = gym.make("margin_rl/AnymalB-v1", margin="analytic")
     env.reset(seed=0)
-    env.unwrapped.core._qvel[0, :] = np.nan
+    env.unwrapped.core.physics.qvel[0, :] = np.nan
     _, reward, terminated, _, info = env.step(np.zeros(12))
     assert terminated and info["diverged"] == 1.0 and np.isfinite(reward)
 
@@ -293,10 +300,10 @@ def test_episode_length_option_is_the_episode_the_agent_sees(vector: bool, toy_w
     """A changed episode_length_s is not overridden by a registered TimeLimit (there is none)."""
     options = {"margin_weights": toy_weights, "episode_length_s": 0.2, "randomization": NO_NOISE}  # 10 steps
     if vector:
-        env = gym.make_vec("margin_rl/AnymalB-v0", num_envs=2, **options)
+        env = gym.make_vec("margin_rl/AnymalB-v1", num_envs=2, **options)
         actions = np.zeros((2, 12))
     else:
-        env = gym.make("margin_rl/AnymalB-v0", **options)
+        env = gym.make("margin_rl/AnymalB-v1", **options)
         actions = np.zeros(12)
     env.reset(seed=0)
     for step in range(1, 11):
@@ -314,9 +321,9 @@ def test_info_lambda_is_the_state_the_margin_saw(vector: bool, toy_weights: str)
 
     options = {"margin_weights": toy_weights, "randomization": RandomizationConfig(push_interval_s=0.1)}
     env = (
-        gym.make_vec("margin_rl/AnymalB-v0", num_envs=3, **options)
+        gym.make_vec("margin_rl/AnymalB-v1", num_envs=3, **options)
         if vector
-        else gym.make("margin_rl/AnymalB-v0", **options)
+        else gym.make("margin_rl/AnymalB-v1", **options)
     )
     env.reset(seed=1)
     rng = np.random.default_rng(0)
@@ -341,10 +348,10 @@ def test_analytic_kind_gives_a_flight_phase_the_extended_margin_not_the_floor() 
     from margin_rl.envs.core import MARGIN_CLIP
     from margin_rl.stability.analytic.extended import extended_margin
 
-    env = gym.make("margin_rl/AnymalC-v0", margin="analytic", randomization=NO_NOISE)
+    env = gym.make("margin_rl/AnymalC-v1", margin="analytic", randomization=NO_NOISE)
     env.reset(seed=0)
     core = env.unwrapped.core
-    core._qpos[0, 2] += 1.0  # 1 m up: no foot in contact for the next few steps
+    core.physics.qpos[0, 2] += 1.0  # 1 m up: no foot in contact for the next few steps
     info = env.step(np.zeros(12))[4]
     assert info["contacts"].tolist() == [0.0, 0.0, 0.0, 0.0]
     expected = extended_margin(core.robot, core.last_lambda[0])
@@ -357,7 +364,7 @@ def test_acceleration_filter_smooths_lambda_not_the_measured_accelerations(toy_w
     from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES
 
     envs = [
-        gym.make("margin_rl/AnymalB-v0", margin_weights=toy_weights, randomization=NO_NOISE, acceleration_filter=f)
+        gym.make("margin_rl/AnymalB-v1", margin_weights=toy_weights, randomization=NO_NOISE, acceleration_filter=f)
         for f in (0.0, 0.5)
     ]
     for env in envs:
@@ -385,7 +392,7 @@ def test_knee_clearance_term_matches_the_shank_bodies_in_mujoco(toy_weights: str
     assert "reward_knee_clearance" not in off.step(np.zeros((1, 12))).info
 
     clearance = 0.35  # above the standing knees (about 0.28 m), so every knee counts
-    core = AnymalCore(config.replace(knee_clearance=2.0, knee_clearance_height=clearance), 2, seed=0)
+    core = AnymalCore(config.replace(reward_params={"knee_clearance": 2.0, "knee_clearance_height": clearance}), 2, 0)
     core.reset()
     for _ in range(5):
         out = core.step(np.zeros((2, 12)))
@@ -402,7 +409,7 @@ def test_knee_clearance_term_matches_the_shank_bodies_in_mujoco(toy_weights: str
 )
 def test_knee_clearance_rejects_bad_values(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
-        EnvConfig(**{field: value})
+        EnvConfig(reward_params={field: value})
 
 
 def test_push_in_the_air_changes_the_momentum_by_the_impulse(toy_weights: str) -> None:
@@ -413,17 +420,17 @@ def test_push_in_the_air_changes_the_momentum_by_the_impulse(toy_weights: str) -
     core = AnymalCore(config, 2, seed=0)
     core.reset()
     yaw = np.array([0.0, 0.7])
-    core._qpos[:, 2] += 20.0  # far above the floor for the whole test
-    core._qpos[:, 3:7] = np.column_stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)])
-    core._qvel[:] = 0.0
-    core.batch.forward()
+    core.physics.qpos[:, 2] += 20.0  # far above the floor for the whole test
+    core.physics.qpos[:, BASE_QUATERNION_QPOS] = np.column_stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)])
+    core.physics.qvel[:] = 0.0
+    core.physics.forward()
     mass = mujoco.mj_getTotalmass(core.model)
     force = np.array([[60.0, 0.0, 0.0], [0.0, -45.0, 0.0]])  # heading frame [N]
     duration = 0.1
     steps = core.push_steps(duration)
     assert steps == 5
     com_vel_before = core._read().com_vel.copy()
-    heading_at_push = heading_rotation(quat_wxyz_to_matrix(core._qpos[:, 3:7]))
+    heading_at_push = heading_rotation(quat_wxyz_to_matrix(core.physics.qpos[:, BASE_QUATERNION_QPOS]))
     core.push(np.arange(2), force, duration, frame="heading")
     for _ in range(steps):
         out = core.step(np.zeros((2, 12)))

@@ -1,5 +1,6 @@
 """Conformance of the ANYmal environments with the stock clients: Gymnasium's and SB3's checkers, Gymnasium's
-vector API (same-step autoreset, list seeds, rendering), and the passive checker's warnings."""
+vector API (next-step and same-step autoreset against SyncVectorEnv, list seeds, rendering), and the passive
+checker's warnings."""
 
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ import margin_rl  # noqa: F401 - registers the ids
 from margin_rl.envs.anymal import available_render_modes
 from margin_rl.envs.config import RandomizationConfig, TerminationConfig
 
-ENV_ID = "margin_rl/AnymalB-v0"
+ENV_ID = "margin_rl/AnymalB-v1"
 NO_NOISE = RandomizationConfig(reset_joint_noise=0.0, reset_velocity_noise=0.0)
 
 # The only check_env warnings left: the observation bounds are ±inf on purpose. The entries are velocities
@@ -39,14 +40,14 @@ HEADLESS_SCRIPT = textwrap.dedent(
     import margin_rl
     from margin_rl.envs.anymal import DisplayUnavailableError
 
-    env = gym.make("margin_rl/AnymalB-v0")
+    env = gym.make("margin_rl/AnymalB-v1")
     check_env(env.unwrapped)  # the stock call: every declared render mode is built and rendered
     print("CHECK_ENV_PASSED", env.unwrapped.metadata["render_modes"])
     for display in (None, ":9999"):  # no display at all, then one that cannot be opened
         if display is not None:
             os.environ["DISPLAY"] = display
         try:
-            gym.make("margin_rl/AnymalB-v0", render_mode="human").reset()
+            gym.make("margin_rl/AnymalB-v1", render_mode="human").reset()
         except DisplayUnavailableError as exc:
             print("HUMAN_REFUSED", display, exc)
     """
@@ -121,7 +122,7 @@ def test_make_vec_autoreset_matches_gymnasium_same_step_semantics() -> None:
     """
     n, limit = 3, 6
     options = dict(randomization=NO_NOISE, termination=TerminationConfig(min_base_height=0.505), margin="none")
-    ours = gym.make_vec(ENV_ID, num_envs=n, max_episode_steps=limit, **options)
+    ours = gym.make_vec(ENV_ID, num_envs=n, max_episode_steps=limit, autoreset_mode=AutoresetMode.SAME_STEP, **options)
     reference = SyncVectorEnv(
         [lambda: gym.make(ENV_ID, max_episode_steps=limit, **options) for _ in range(n)],
         autoreset_mode=AutoresetMode.SAME_STEP,
@@ -157,6 +158,41 @@ def test_make_vec_autoreset_matches_gymnasium_same_step_semantics() -> None:
     reference.close()
 
 
+@pytest.mark.parametrize("mode", [None, AutoresetMode.NEXT_STEP, "NextStep"])
+def test_make_vec_autoreset_matches_gymnasium_next_step_semantics(mode: object) -> None:
+    """The default mode: the step after an episode ended returns the reset observation, reward 0 and
+    terminated = truncated = False, ignoring the action, exactly as Gymnasium's SyncVectorEnv in NEXT_STEP mode."""
+    n, limit = 3, 6
+    options = dict(randomization=NO_NOISE, termination=TerminationConfig(min_base_height=0.505), margin="none")
+    mode_option = {} if mode is None else {"autoreset_mode": mode}
+    ours = gym.make_vec(ENV_ID, num_envs=n, max_episode_steps=limit, **mode_option, **options)
+    reference = SyncVectorEnv(
+        [lambda: gym.make(ENV_ID, max_episode_steps=limit, **options) for _ in range(n)],
+        autoreset_mode=AutoresetMode.NEXT_STEP,
+    )
+    assert ours.metadata["autoreset_mode"] == reference.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    obs, _ = ours.reset(seed=0)
+    np.testing.assert_array_equal(obs, reference.reset(seed=0)[0])
+    rng = np.random.default_rng(0)
+    ends = {"terminated": 0, "truncated": 0, "resets": 0}
+    for _ in range(3 * limit):
+        actions = rng.uniform(-1, 1, (n, 12)) * np.array([[0.0], [1.0], [3.0]])
+        obs, reward, terminated, truncated, infos = ours.step(actions)
+        ref_obs, ref_reward, ref_terminated, ref_truncated, ref_infos = reference.step(actions)
+        np.testing.assert_array_equal(obs, ref_obs)
+        np.testing.assert_allclose(reward, ref_reward, atol=1e-12)
+        np.testing.assert_array_equal(terminated, ref_terminated)
+        np.testing.assert_array_equal(truncated, ref_truncated)
+        assert "final_obs" not in infos and "final_obs" not in ref_infos
+        np.testing.assert_array_equal(infos["_margin"], ref_infos["_margin"])  # masked out where reset
+        ends["terminated"] += int(terminated.sum())
+        ends["truncated"] += int(truncated.sum())
+        ends["resets"] += int((~infos["_margin"]).sum())
+    assert ends["terminated"] > 0 and ends["truncated"] > 0 and ends["resets"] > 0
+    ours.close()
+    reference.close()
+
+
 def test_vector_reset_accepts_a_list_of_seeds_as_gymnasium_does() -> None:
     noisy = RandomizationConfig(observation_noise=1.0)
     vec = gym.make_vec(ENV_ID, num_envs=4, margin="none", randomization=noisy)
@@ -170,7 +206,9 @@ def test_vector_reset_accepts_a_list_of_seeds_as_gymnasium_does() -> None:
         vec.reset(seed=[0, 1, 2])
     with pytest.raises(ValueError, match="mixes None and ints"):
         vec.reset(seed=[0, None, 2, 3])
-    with pytest.raises(ValueError, match=r"seed\[1\] must be an int >= 0"):
+    with pytest.raises(gym.error.Error, match=r"seed\[1\] must be an int >= 0"):
+        vec.reset(seed=[0, -1, 2, 3])
+    with pytest.raises(ValueError, match=r"seed\[1\] must be an int >= 0"):  # a ValueError too
         vec.reset(seed=[0, -1, 2, 3])
 
 

@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 import margin_rl  # noqa: F401 - registers the ids
 from margin_rl.envs import anymal as anymal_module
 from margin_rl.envs.anymal import AnymalEnv
-from margin_rl.envs.config import CommandConfig, EnvConfig, RandomizationConfig, TerminationConfig
+from margin_rl.envs.config import CommandConfig, EnvConfig, RandomizationConfig, RewardParams, TerminationConfig
 from margin_rl.envs.margin_kinds import MARGIN_KINDS
 from margin_rl.envs.terrain import TerrainConfig
 from margin_rl.envs.vector import AnymalVectorEnv
@@ -94,7 +94,7 @@ def assert_finite_or_flagged(observation: np.ndarray, reward: Any, info: dict[st
 )
 def test_bad_margin_weight_is_refused_at_make(value: object, error: type, message: str) -> None:
     with pytest.raises(error, match=message):
-        gym.make("margin_rl/AnymalB-v0", margin_weight=value)
+        gym.make("margin_rl/AnymalB-v1", margin_weight=value)
 
 
 @pytest.mark.parametrize(
@@ -104,7 +104,23 @@ def test_bad_margin_weight_is_refused_at_make(value: object, error: type, messag
         (lambda: EnvConfig(decimation=0), ValueError, r"EnvConfig.decimation must be an int >= 1"),
         (lambda: EnvConfig(action_scale=float("inf")), ValueError, r"EnvConfig.action_scale must be a finite"),
         (lambda: EnvConfig(episode_length_s=0), ValueError, r"EnvConfig.episode_length_s must be .* > 0"),
-        (lambda: EnvConfig(logistic_gain=-8.0), ValueError, r"EnvConfig.logistic_gain must be .* > 0"),
+        (
+            lambda: EnvConfig(reward_params={"logistic_gain": -8.0}),
+            ValueError,
+            r"EnvConfig.reward_params: RewardParams.logistic_gain must be .* > 0",
+        ),
+        (lambda: RewardParams(alive_bonus=-0.1), ValueError, r"RewardParams.alive_bonus must be a finite number >= 0"),
+        (
+            lambda: EnvConfig(reward_params={"alive_bonsu": 0.1}),
+            TypeError,
+            r"EnvConfig.reward_params: unknown key\(s\) \['alive_bonsu'\]; the known keys are alive_bonus, "
+            r"knee_clearance, knee_clearance_height, logistic_gain",
+        ),
+        (
+            lambda: EnvConfig(reward_params=0.1),
+            TypeError,
+            r"EnvConfig.reward_params must be a RewardParams.*pass a mapping such as reward_params=\{'alive_bonus'",
+        ),
         (lambda: EnvConfig(acceleration_filter=1.0), ValueError, r"EnvConfig.acceleration_filter .* < 1"),
         (lambda: EnvConfig(robot="anymal_d"), ValueError, r"EnvConfig.robot must be one of \['anymal_b'"),
         (lambda: EnvConfig(terrain="hills"), ValueError, r"EnvConfig.terrain must be one of"),
@@ -156,19 +172,19 @@ def test_valid_configs_are_stored_unchanged() -> None:
 
 @pytest.fixture(scope="module")
 def single() -> AnymalEnv:
-    return gym.make("margin_rl/AnymalB-v0", margin="none").unwrapped
+    return gym.make("margin_rl/AnymalB-v1", margin="none").unwrapped
 
 
 @pytest.fixture(scope="module")
 def batch() -> AnymalVectorEnv:
-    return gym.make_vec("margin_rl/AnymalB-v0", num_envs=2, margin="none")
+    return gym.make_vec("margin_rl/AnymalB-v1", num_envs=2, margin="none")
 
 
 def test_step_before_reset_is_an_error() -> None:
-    env = gym.make("margin_rl/AnymalB-v0", margin="none").unwrapped
+    env = gym.make("margin_rl/AnymalB-v1", margin="none").unwrapped
     with pytest.raises(ResetNeeded, match=r"step\(\) was called before reset\(\)"):
         env.step(np.zeros(12))
-    vec = gym.make_vec("margin_rl/AnymalB-v0", num_envs=2, margin="none")
+    vec = gym.make_vec("margin_rl/AnymalB-v1", num_envs=2, margin="none")
     with pytest.raises(ResetNeeded, match=r"step\(\) was called before reset\(\)"):
         vec.step(np.zeros((2, 12)))
 
@@ -209,10 +225,9 @@ def test_reset_options_are_refused_not_ignored(single: AnymalEnv) -> None:
 
 
 def test_a_value_too_large_for_floats_raises_instead_of_returning_inf() -> None:
-    env = gym.make("margin_rl/AnymalB-v0", margin="none", randomization=RandomizationConfig(observation_noise=1e41))
+    env = gym.make("margin_rl/AnymalB-v1", margin="none", randomization=RandomizationConfig(observation_noise=1e41))
     with pytest.raises(FloatingPointError, match=r"observation is not finite.*observation_noise=1e"):
         env.reset(seed=0)
-
 
 
 def test_the_core_itself_refuses_non_finite_outputs_for_every_adapter() -> None:
@@ -248,10 +263,7 @@ NUMERIC_FIELDS: dict[type, list[str]] = {
         "action_scale",
         "episode_length_s",
         "margin_weight",
-        "alive_bonus",
-        "knee_clearance",
-        "knee_clearance_height",
-        "logistic_gain",
+        "reward_params",
         "acceleration_filter",
         "privileged_observations",
         "robot",
@@ -275,6 +287,7 @@ NUMERIC_FIELDS: dict[type, list[str]] = {
         "reset_velocity_noise",
     ],
     CommandConfig: ["forward_velocity", "lateral_velocity", "yaw_rate"],
+    RewardParams: ["alive_bonus", "knee_clearance", "knee_clearance_height", "logistic_gain"],
     TerminationConfig: ["min_base_height", "max_tilt_rad"],
     TerrainConfig: ["size", "resolution", "tile", "step_height", "max_slope_deg", "pad", "base_level", "max_height"],
 }
@@ -293,19 +306,33 @@ FIELD_CHOICES = [(cls, name) for cls, names in NUMERIC_FIELDS.items() for name i
 def test_fuzz_config_fields(choice: tuple[type, str], value: object) -> None:
     cls, name = choice
     nested = {TerrainConfig: "terrain_config", CommandConfig: "command", RandomizationConfig: "randomization"}
-    nested[TerminationConfig] = "termination"
+    nested[TerminationConfig], nested[RewardParams] = "termination", "reward_params"
 
     def build() -> object:
         config = cls(**{name: value})
         return config if cls is EnvConfig else getattr(EnvConfig(**{nested[cls]: config}), nested[cls])
 
     config = attempt(build, name)
-    if config is not None:
+    if config is not None and name == "reward_params" and isinstance(value, dict):
+        assert config.reward_params == RewardParams.from_mapping(value)  # the one field a mapping is converted for
+    elif config is not None:
         assert getattr(config, name) is value  # stored as given
         # What was accepted is a sane value: no NaN/inf, and no str, bool or dict where a number belongs.
         assert not (isinstance(value, float) and not math.isfinite(value)), (name, value)
         if name in NUMBER_FIELDS:
             assert not isinstance(value, (str, bool, dict, list, tuple)), (name, value)
+
+
+@FUZZ
+@given(params=st.dictionaries(st.sampled_from([*RewardParams.keys_known(), "alive", "gain", ""]), ANYTHING, max_size=3))
+def test_fuzz_reward_params_mapping(params: dict[str, object]) -> None:
+    """Any mapping given as reward_params: accepted with its keys' values, or an error naming the mapping."""
+    config = attempt(lambda: EnvConfig(reward_params=params), "reward_params")
+    if config is not None:
+        assert set(params) <= set(RewardParams.keys_known())
+        for key, value in params.items():
+            assert config.reward_params[key] is value  # each value stored as given
+        assert dict(config.reward_params) == {**dict(RewardParams()), **params}
 
 
 @FUZZ
@@ -337,10 +364,10 @@ def test_fuzz_valid_configs_never_return_nan(
         push_interval_s=0.05,
     )
     env = gym.make(
-        "margin_rl/AnymalB-v0",
+        "margin_rl/AnymalB-v1",
         margin="none",
         margin_weight=margin_weight,
-        alive_bonus=alive_bonus,
+        reward_params={"alive_bonus": alive_bonus},
         action_scale=action_scale,
         reward_preset=preset,
         randomization=randomization,

@@ -205,7 +205,7 @@ def test_rsl_backend_on_a_generic_id_is_a_clear_error(tmp_path: Path, capsys: py
 def test_unknown_id_lists_the_margin_rl_ids(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(ValueError, match="unknown environment id") as info:
         train_module.make_spec("margin_rl/NoSuchHopper-v0", "sb3")
-    assert SLIP in str(info.value) and "margin_rl/AnymalB-v0" in str(info.value)
+    assert SLIP in str(info.value) and "margin_rl/AnymalB-v1" in str(info.value)
     with pytest.raises(SystemExit):
         train_module.main(["--env", "margin_rl/NoSuchHopper-v0", "--run-dir", str(tmp_path / "run")])
     assert SLIP in capsys.readouterr().err

@@ -130,13 +130,15 @@ def make_rsl_env(
     (reset on construction; observations and rewards as torch tensors on ``device``).
 
     ``env_options``: any :class:`~margin_rl.envs.config.EnvConfig` field (e.g. ``margin_weight=0.2``,
-    ``alive_bonus=0.1``); ``seed`` seeds the initial states. Example::
+    ``reward_params={"alive_bonus": 0.1}``); ``seed`` seeds the initial states. Example::
 
         from rsl_rl.runners import OnPolicyRunner
         from margin_rl.train import make_rsl_env
         from margin_rl.train.config import RslPPOConfig
 
-        env = make_rsl_env("margin_rl/AnymalB-v0", num_envs=64, seed=0, margin_weight=0.2, alive_bonus=0.1)
+        env = make_rsl_env(
+            "margin_rl/AnymalB-v1", num_envs=64, seed=0, margin_weight=0.2, reward_params={"alive_bonus": 0.1}
+        )
         OnPolicyRunner(env, RslPPOConfig().runner_cfg(False, 50), log_dir=None).learn(100)
 
     Raises:

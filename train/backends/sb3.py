@@ -231,12 +231,14 @@ def make_sb3_env(env_id: str, num_envs: int, seed: int | None = None, **env_opti
     batched simulation (much faster than SB3's ``DummyVecEnv`` of single environments).
 
     ``env_options``: any :class:`~margin_rl.envs.config.EnvConfig` field (e.g. ``margin_weight=0.2``,
-    ``alive_bonus=0.1``, ``margin="analytic"``); ``seed`` seeds the initial states. Example::
+    ``reward_params={"alive_bonus": 0.1}``, ``margin="analytic"``); ``seed`` seeds the initial states. Example::
 
         from stable_baselines3 import PPO
         from margin_rl.train import make_sb3_env
 
-        env = make_sb3_env("margin_rl/AnymalB-v0", num_envs=64, seed=0, margin_weight=0.2, alive_bonus=0.1)
+        env = make_sb3_env(
+            "margin_rl/AnymalB-v1", num_envs=64, seed=0, margin_weight=0.2, reward_params={"alive_bonus": 0.1}
+        )
         PPO("MlpPolicy", env, n_steps=24).learn(100_000)
 
     Raises:

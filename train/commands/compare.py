@@ -2,11 +2,12 @@
 
 Example::
 
-    python -m margin_rl.train compare --env margin_rl/AnymalB-v0 --backend rsl --seeds 3 \\
-        --total-steps 5000000 --margin-weight 0.2 --env-option alive_bonus=0.1 --out runs/compare_b
+    python -m margin_rl.train compare --env margin_rl/AnymalB-v1 --backend rsl --seeds 3 \\
+        --total-steps 5000000 --margin-weight 0.2 --env-option reward_params.alive_bonus=0.1 \\
+        --out runs/compare_b
 
-For the ANYmal ids, ``--margin-weight`` defaults to 0.2 and ``--env-option alive_bonus`` to 0.1 for both
-variants: the shipped experiment (see :mod:`margin_rl.train.commands.options`).
+For the ANYmal ids, ``--margin-weight`` defaults to 0.2 and ``--env-option reward_params.alive_bonus`` to 0.1 for
+both variants: the shipped experiment (see :mod:`margin_rl.train.commands.options`).
 
 For each variant (margin weight 0, and ``--margin-weight``) and each training seed, a run is trained into
 ``<out>/runs/mw<weight>__s<seed>`` (a finished run is reused, a stopped one resumed), then evaluated on the same

@@ -5,7 +5,7 @@ Examples::
     python -m margin_rl.train evaluate runs/<run>/final_model.pt            # rsl-rl checkpoint
     python -m margin_rl.train evaluate runs/<run>/final_model.zip --episodes 8   # SB3 (unpickles: trusted files only)
     python -m margin_rl.train evaluate runs/<run>/policy_torchscript.pt --video
-    python -m margin_rl.train evaluate policy.pt --env margin_rl/AnymalC-v0 --forward-velocity 1.0
+    python -m margin_rl.train evaluate policy.pt --env margin_rl/AnymalC-v1 --forward-velocity 1.0
     python -m margin_rl.train evaluate runs/<slip run>/final_model.zip --env-option goal_velocity=0.5
 
 The environment is the policy's training environment (its run's ``config.json``) unless ``--env`` or

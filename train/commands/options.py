@@ -5,9 +5,9 @@ option overrides (EnvConfig fields for the ANYmal ids, constructor keywords for 
 
 Training defaults of the command line (``train`` and ``compare``, ANYmal ids only): the shipped, working
 experiment of the README and ``bundled/anymal_b_v1/CARD.md``, margin weight :data:`CLI_MARGIN_WEIGHT` and
-``alive_bonus`` :data:`CLI_ALIVE_BONUS` (:func:`with_training_defaults`). ``EnvConfig``'s own defaults (the
-paper's reward: weight 1, no bonus) stay what the Python API and the environments use: with them, a trot's
-negative learned margin makes every step's reward negative and PPO learns to fall.
+``reward_params.alive_bonus`` :data:`CLI_ALIVE_BONUS` (:func:`with_training_defaults`). ``EnvConfig``'s own
+defaults (the paper's reward: weight 1, no bonus) stay what the Python API and the environments use: with them, a
+trot's negative learned margin makes every step's reward negative and PPO learns to fall.
 """
 
 from __future__ import annotations
@@ -23,10 +23,11 @@ from margin_rl.train.environments import DEFAULT_ENV, is_batched_anymal
 CLI_MARGIN_WEIGHT = 0.2
 """Margin-reward weight of ``train`` (and of ``compare``'s margin variant) unless ``--margin-weight`` is given."""
 CLI_ALIVE_BONUS = 0.1
-"""``alive_bonus`` of ``train`` and ``compare`` unless ``--env-option alive_bonus=...`` is given."""
+"""``reward_params.alive_bonus`` of ``train`` and ``compare`` unless ``--env-option reward_params.alive_bonus=...``
+(or a ``reward_params`` mapping naming ``alive_bonus``) is given."""
 DEFAULTS_HELP = (
     f"ANYmal ids default to the shipped experiment: --margin-weight {CLI_MARGIN_WEIGHT:g} and "
-    f"--env-option alive_bonus={CLI_ALIVE_BONUS:g} (EnvConfig's own defaults, weight 1 and no bonus, "
+    f"--env-option reward_params.alive_bonus={CLI_ALIVE_BONUS:g} (EnvConfig's own defaults, weight 1 and no bonus, "
     "make PPO learn to fall)"
 )
 
@@ -41,9 +42,9 @@ def add_env_arguments(parser: argparse.ArgumentParser) -> None:
         "--env-option",
         action="append",
         metavar="KEY=VALUE",
-        help="ANYmal ids: any EnvConfig field, e.g. command='{\"forward_velocity\": [0.5, 1.0]}'; other ids: a "
-        "constructor keyword of the environment or max_episode_steps, e.g. goal_velocity=0.5. VALUE in JSON "
-        "(repeatable)",
+        help="ANYmal ids: any EnvConfig field, e.g. command='{\"forward_velocity\": [0.5, 1.0]}', or one entry of "
+        "a mapping field, e.g. reward_params.alive_bonus=0.1; other ids: a constructor keyword of the environment "
+        "or max_episode_steps, e.g. goal_velocity=0.5. VALUE in JSON (repeatable)",
     )
 
 
@@ -60,8 +61,8 @@ def env_overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 def with_training_defaults(env_id: str, overrides: Mapping[str, Any], margin_weight: bool = True) -> dict[str, Any]:
     """``overrides`` with the command line's training defaults filled in for an ANYmal id (unchanged for others):
-    ``alive_bonus`` :data:`CLI_ALIVE_BONUS` and, with ``margin_weight``, ``margin_weight``
-    :data:`CLI_MARGIN_WEIGHT`, unless given.
+    ``reward_params.alive_bonus`` :data:`CLI_ALIVE_BONUS` and, with ``margin_weight``, ``margin_weight``
+    :data:`CLI_MARGIN_WEIGHT`, unless given (the other ``reward_params`` entries given are kept).
 
     Raises:
         ValueError: the id is not registered.
@@ -69,4 +70,7 @@ def with_training_defaults(env_id: str, overrides: Mapping[str, Any], margin_wei
     if not is_batched_anymal(env_id):
         return dict(overrides)
     defaults = {"margin_weight": CLI_MARGIN_WEIGHT} if margin_weight else {}
-    return {**defaults, "alive_bonus": CLI_ALIVE_BONUS, **overrides}
+    params = overrides.get("reward_params", {})
+    if isinstance(params, Mapping):  # anything else is passed on, for the config check to name
+        params = {"alive_bonus": CLI_ALIVE_BONUS, **params}
+    return {**defaults, **overrides, "reward_params": params}

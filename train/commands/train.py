@@ -2,12 +2,12 @@
 
 Examples::
 
-    python -m margin_rl.train train --env margin_rl/AnymalB-v0 --backend rsl --margin-weight 0.2 --seed 1 \\
-        --num-envs 128 --total-steps 5000000 --env-option alive_bonus=0.1    # the defaults, written out
+    python -m margin_rl.train train --env margin_rl/AnymalB-v1 --backend rsl --margin-weight 0.2 --seed 1 \\
+        --num-envs 128 --total-steps 5000000 --env-option reward_params.alive_bonus=0.1   # the defaults
     python -m margin_rl.train train --backend sb3 --margin-weight 0 --run-dir runs/baseline
     python -m margin_rl.train train --resume runs/baseline            # continue a stopped or killed run
     python -m margin_rl.train train --resume runs/baseline --total-steps 10000000   # ... and extend it
-    python -m margin_rl.train train --env margin_rl/AnymalB-Rough-v0 --margin-weight 0 --total-steps 3000000 \
+    python -m margin_rl.train train --env margin_rl/AnymalB-Rough-v1 --margin-weight 0 --total-steps 3000000 \
         --init-from runs/baseline/final_model.pt --run-dir runs/baseline_rough    # fine-tune a flat policy
     python -m margin_rl.train train --env margin_rl/SLIPHopper-v0 --backend sb3 --margin-weight 0.5 \\
         --num-envs 8 --total-steps 20000 --env-option goal_velocity=0.5
@@ -21,8 +21,9 @@ there; ``--backend rsl`` is an error): SB3's ``DummyVecEnv`` of ``gymnasium.make
 names are an error listing the keywords it takes. See :mod:`margin_rl.train.environments`.
 
 Defaults for the ANYmal ids: the shipped, working experiment of the README and ``bundled/anymal_b_v1/CARD.md``,
-``--margin-weight 0.2`` and ``--env-option alive_bonus=0.1`` unless given (:mod:`margin_rl.train.commands.options`;
-``make_spec`` and ``EnvConfig`` keep the paper's reward: weight 1, no bonus).
+``--margin-weight 0.2`` and ``--env-option reward_params.alive_bonus=0.1`` unless given
+(:mod:`margin_rl.train.commands.options`; ``make_spec`` and ``EnvConfig`` keep the paper's reward: weight 1, no
+bonus).
 
 Each run directory (default ``runs/<env>__<backend>__mw<weight>__s<seed>__<time>``, without ``mw<weight>``
 for an environment without a margin weight) holds ``config.json`` (environment: ``env_config`` for ANYmal,

@@ -150,7 +150,7 @@ def test_compare_variants_covers_every_table_metric() -> None:
 
 def test_write_markdown_adds_the_statistics_table_after_the_unchanged_one(tmp_path: Path) -> None:
     settings_ = {
-        "env_id": "margin_rl/AnymalB-v0",
+        "env_id": "margin_rl/AnymalB-v1",
         "backend": "rsl",
         "seeds": [0, 1, 2],
         "total_steps": 1000,
@@ -189,7 +189,8 @@ def test_difference_table_says_why_a_row_has_no_test() -> None:
 def test_summarise_runs_compares_each_weight_with_weight_zero() -> None:
     """The committed ANYmal B sweep (three seeds per weight): accelerations significantly lower at 0.2 and 0.5,
     falls not significantly different, as its commit states."""
-    spec = importlib.util.spec_from_file_location("summarise_runs", ROOT / "benchmarks" / "summarise_runs.py")
+    script = ROOT / "benchmarks" / "studies" / "summarise_runs.py"
+    spec = importlib.util.spec_from_file_location("summarise_runs", script)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     runs = json.loads((ROOT / "docs" / "comparison" / "v2_sweep_anymal_b.json").read_text())["runs"]

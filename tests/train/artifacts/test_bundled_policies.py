@@ -9,7 +9,7 @@ from margin_rl.train.artifacts.bundle import bundled_names, load_bundle
 from margin_rl.train.artifacts.policies import load_policy
 from margin_rl.train.commands.evaluate import evaluate
 
-SHIPPED = {
+SHIPPED = {  # the ids the bundles stored (-v0, read as -v1: margin_rl.registration.current_env_id)
     "anymal_b_v1": "margin_rl/AnymalB-v0",  # the first comparison (v1 learned margin)
     "anymal_b": "margin_rl/AnymalB-v0",  # issue 17: v2 learned margin, knee clearance
     "anymal_c": "margin_rl/AnymalC-v0",

@@ -29,7 +29,7 @@ SHORT = {"episode_length_s": 0.1}  # 5 policy steps
 
 
 def _core(weights: str, num_envs: int = 4, seed: int = 0, **overrides: object):
-    config = env_config_for("margin_rl/AnymalB-v0", {"margin_weights": weights, **SHORT, **overrides})
+    config = env_config_for("margin_rl/AnymalB-v1", {"margin_weights": weights, **SHORT, **overrides})
     return make_core(config, num_envs, seed)
 
 
@@ -143,7 +143,7 @@ def test_config_round_trip_and_overrides() -> None:
 # ---------------------------------------------------------------------------------------------------------------------
 def test_plain_sb3_ppo_learns_on_make_sb3_env(toy_weights: str) -> None:
     assert margin_rl.train.make_sb3_env is make_sb3_env  # re-exported by the package
-    env = make_sb3_env("margin_rl/AnymalB-v0", 4, seed=0, margin_weights=toy_weights, margin_weight=0.2, **SHORT)
+    env = make_sb3_env("margin_rl/AnymalB-v1", 4, seed=0, margin_weights=toy_weights, margin_weight=0.2, **SHORT)
     assert isinstance(env, Sb3VecEnv) and env.num_envs == 4 and env.core.config.margin_weight == 0.2
     model = PPO("MlpPolicy", env, n_steps=32, batch_size=64, n_epochs=1, seed=0, device="cpu")
     model.learn(256)
@@ -152,16 +152,18 @@ def test_plain_sb3_ppo_learns_on_make_sb3_env(toy_weights: str) -> None:
 
 def test_rsl_runner_constructs_on_make_rsl_env(toy_weights: str, tmp_path) -> None:
     assert margin_rl.train.make_rsl_env is make_rsl_env
-    env = make_rsl_env("margin_rl/AnymalB-v0", 4, seed=0, margin_weights=toy_weights, alive_bonus=0.1, **SHORT)
-    assert isinstance(env, RslVecEnv) and env.device == torch.device("cpu") and env.core.config.alive_bonus == 0.1
+    params = {"alive_bonus": 0.1}
+    env = make_rsl_env("margin_rl/AnymalB-v1", 4, seed=0, margin_weights=toy_weights, reward_params=params, **SHORT)
+    assert isinstance(env, RslVecEnv) and env.device == torch.device("cpu")
+    assert env.core.config.reward_params.alive_bonus == 0.1
     runner = OnPolicyRunner(env, RslPPOConfig().runner_cfg(False, 50), log_dir=None, device="cpu")
     assert runner.env is env
 
 
 @pytest.mark.parametrize("factory", [make_sb3_env, make_rsl_env])
 def test_factories_name_what_is_wrong(factory, toy_weights: str) -> None:
-    with pytest.raises(TypeError, match=r"unknown environment option\(s\) \['no_such_option'\].*alive_bonus"):
-        factory("margin_rl/AnymalB-v0", 2, no_such_option=1)
+    with pytest.raises(TypeError, match=r"unknown environment option\(s\) \['no_such_option'\].*reward_params"):
+        factory("margin_rl/AnymalB-v1", 2, no_such_option=1)
     with pytest.raises(ValueError, match=r"'margin_rl/SLIPHopper-v0' is not one of them: .*(make_vec_env|sb3)"):
         factory("margin_rl/SLIPHopper-v0", 2)
     with pytest.raises(ValueError, match="unknown environment id"):

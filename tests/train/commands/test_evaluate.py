@@ -33,7 +33,7 @@ def test_evaluate_each_policy_kind(run: str, name: str, kind: str, request: pyte
     args = [str(run_dir / name), "--episodes", "2", "--max-steps", "30", "--warmup-s", "0.1", "--out", str(out)]
     assert main(args) == 0
     report = json.loads((out / "metrics.json").read_text())
-    assert report["kind"] == kind and report["env_id"] == "margin_rl/AnymalB-v0" and report["episodes"] == 2
+    assert report["kind"] == kind and report["env_id"] == "margin_rl/AnymalB-v1" and report["episodes"] == 2
     assert report["env_config"]["command"]["forward_velocity"] == [0.75, 0.75]
     for key in ("velocity_error_mean", "lin_acc_rms_x", "lin_acc_peak_z", "stance_width_mean", "margin_mean", "fell"):
         assert key in report["summary"] and len(report["per_episode"]) == 2

@@ -38,7 +38,7 @@ def standing_target(toy_weights: str, forward_velocity: float = 0.0) -> AnymalTa
         margin_weights=toy_weights,
         randomization=RandomizationConfig(reset_joint_noise=0.0, reset_velocity_noise=0.0),
     )
-    return AnymalTarget("margin_rl/AnymalB-v0", evaluation_config(config, forward_velocity))
+    return AnymalTarget("margin_rl/AnymalB-v1", evaluation_config(config, forward_velocity))
 
 
 @pytest.mark.parametrize(

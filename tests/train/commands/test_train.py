@@ -116,16 +116,19 @@ def _spec(*argv: str) -> train_module.TrainSpec:
 
 
 def test_cli_defaults_are_the_shipped_experiment() -> None:
-    config = _spec().env_config  # margin_rl/AnymalB-v0: --margin-weight 0.2 --env-option alive_bonus=0.1
-    assert config.margin_weight == 0.2 and config.alive_bonus == 0.1
-    config = _spec("--env", "margin_rl/AnymalC-v0", "--margin-weight", "0", "--env-option", "alive_bonus=0").env_config
-    assert config.margin_weight == 0.0 and config.alive_bonus == 0.0  # given values win
+    config = _spec().env_config  # margin_rl/AnymalB-v1: --margin-weight 0.2 --env-option reward_params.alive_bonus=0.1
+    assert config.margin_weight == 0.2 and config.reward_params.alive_bonus == 0.1
+    argv = ("--env", "margin_rl/AnymalC-v1", "--margin-weight", "0", "--env-option", "reward_params.alive_bonus=0")
+    config = _spec(*argv).env_config
+    assert config.margin_weight == 0.0 and config.reward_params.alive_bonus == 0.0  # given values win
+    config = _spec("--env-option", "reward_params.knee_clearance=5").env_config  # other entries keep the default
+    assert config.reward_params.knee_clearance == 5 and config.reward_params.alive_bonus == 0.1
     assert _spec("--env-option", "margin_weight=0.7").env_config.margin_weight == 0.7
     # other ids keep their own defaults; the Python API keeps EnvConfig's
     assert _spec("--env", "margin_rl/SLIPHopper-v0").env_kwargs == {}
     assert train_module.make_spec().env_config.margin_weight == 1.0
     helptext = train_module.build_parser().format_help()
-    assert "--margin-weight 0.2" in helptext and "alive_bonus=0.1" in helptext
+    assert "--margin-weight 0.2" in helptext and "reward_params.alive_bonus=0.1" in helptext
 
 
 def test_compare_cli_defaults_are_the_shipped_experiment() -> None:
@@ -133,6 +136,6 @@ def test_compare_cli_defaults_are_the_shipped_experiment() -> None:
     from margin_rl.train.commands.options import with_training_defaults
 
     assert build_parser().parse_args([]).margin_weight == 0.2
-    assert "alive_bonus=0.1" in build_parser().format_help()
-    options = with_training_defaults("margin_rl/AnymalB-v0", {"margin": "none"}, margin_weight=False)
-    assert options == {"alive_bonus": 0.1, "margin": "none"}  # the variants set their own margin weights
+    assert "reward_params.alive_bonus=0.1" in build_parser().format_help()
+    options = with_training_defaults("margin_rl/AnymalB-v1", {"margin": "none"}, margin_weight=False)
+    assert options == {"reward_params": {"alive_bonus": 0.1}, "margin": "none"}  # the variants set their weights

@@ -1,0 +1,167 @@
+"""The physics seam of :class:`~margin_rl.envs.core.AnymalCore`: every call it makes into the simulator.
+
+:class:`MujocoBatchPhysics` holds ``num_envs`` simulations of one MuJoCo model in ``mujoco.batch.Batch``
+(a native thread pool, results bit-identical to one ``MjData`` per simulation at any thread count). The core
+reads the state through the live arrays below, writes controls and external forces into them, and calls
+:meth:`~MujocoBatchPhysics.reset`, :meth:`~MujocoBatchPhysics.forward` and :meth:`~MujocoBatchPhysics.step`;
+model constants come from the lookups by name. Another backend (a GPU batch, a loop over ``MjData``) can sit
+behind the same members.
+
+Live arrays, ``(num_envs, ...)``: ``qpos``, ``qvel``, ``ctrl``, ``xfrc_applied`` and ``time`` are the state
+(writes take effect at the next call); ``sensordata``, ``site_xpos``, ``xpos`` and ``actuator_force`` are
+outputs, refreshed by every call.
+
+:meth:`~MujocoBatchPhysics.get_state` and :meth:`~MujocoBatchPhysics.set_state` carry the whole integration
+state (including the solver's warm start) and the per-environment model fields, so that a restored copy steps
+to the same numbers (what pickling an environment needs).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import mujoco
+import numpy as np
+from mujoco import batch as mj_batch
+
+SET_CONST_INPUTS = frozenset({"body_mass"})
+"""Per-environment model fields written here that MuJoCo derives constants from (``mj_setConst``)."""
+
+
+def usable_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the platform reports one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # macOS, Windows: no affinity API
+        return max(1, os.cpu_count() or 1)
+
+
+class MujocoBatchPhysics:
+    """``num_envs`` simulations of ``model`` in one ``mujoco.batch.Batch`` (see the module docstring)."""
+
+    def __init__(self, model: mujoco.MjModel, num_envs: int, nthread: int | None = None) -> None:
+        """``nthread``: threads of the batch; None: one per core this process may run on (:func:`usable_cores`).
+        (MuJoCo's nthread=0 would start one per core of the machine, so several trainings pinned to a few cores
+        each, with taskset or cgroups, would oversubscribe.)"""
+        self.model = model
+        self.num_envs = num_envs
+        self.batch = mj_batch.Batch(model, nsim=num_envs, nthread=usable_cores() if nthread is None else nthread)
+        bind = self.batch.bind
+        self.qpos, self.qvel, self.time = bind("qpos"), bind("qvel"), bind("time")
+        self.ctrl, self.xfrc_applied = bind("ctrl"), bind("xfrc_applied")
+        self.sensordata, self.site_xpos, self.xpos = bind("sensordata"), bind("site_xpos"), bind("xpos")
+        self.actuator_force = bind("actuator_force")
+        self._per_env_fields: dict[str, np.ndarray] = {}
+
+    # ------------------------------------------------------------------ model constants
+    @property
+    def timestep(self) -> float:
+        """Physics time step [s] (the MJCF's)."""
+        return float(self.model.opt.timestep)
+
+    @property
+    def nv(self) -> int:
+        """Degrees of freedom (the size of a ``qvel`` row)."""
+        return int(self.model.nv)
+
+    def body_id(self, name: str) -> int:
+        return int(self.model.body(name).id)
+
+    def site_id(self, name: str) -> int:
+        return int(self.model.site(name).id)
+
+    def geom_id(self, name: str) -> int:
+        return int(self.model.geom(name).id)
+
+    def keyframe(self, name: str) -> tuple[int, np.ndarray, np.ndarray]:
+        """(id, qpos, ctrl) of the keyframe ``name`` (copies)."""
+        key = int(self.model.key(name).id)
+        return key, self.model.key_qpos[key].copy(), self.model.key_ctrl[key].copy()
+
+    def sensor_slice(self, name: str) -> slice:
+        """The entries of sensor ``name`` in a ``sensordata`` row."""
+        sensor = self.model.sensor(name)
+        return slice(int(sensor.adr[0]), int(sensor.adr[0] + sensor.dim[0]))
+
+    def sensor_adr(self, name: str) -> int:
+        """The first entry of sensor ``name`` in a ``sensordata`` row (a contact sensor's "found")."""
+        return int(self.model.sensor(name).adr[0])
+
+    def body_mass(self, body: int) -> float:
+        """The model's mass of ``body`` [kg] (before any per-environment change)."""
+        return float(self.model.body_mass[body])
+
+    def geom_friction(self, geom: int) -> float:
+        """The model's sliding friction coefficient of ``geom``."""
+        return float(self.model.geom_friction[geom, 0])
+
+    # ------------------------------------------------------------------ per-environment model fields
+    def per_env_field(self, name: str) -> np.ndarray:
+        """The live ``(num_envs, ...)`` per-environment values of model field ``name`` (``geom_friction``,
+        ``body_mass``); after writing a field of :data:`SET_CONST_INPUTS`, call :meth:`set_const`."""
+        if name not in self._per_env_fields:
+            self._per_env_fields[name] = self.batch.expand(name)
+        return self._per_env_fields[name]
+
+    def set_const(self) -> None:
+        """Recompute the constants MuJoCo derives from the per-environment model fields."""
+        self.batch.set_const()
+
+    # ------------------------------------------------------------------ operations
+    def reset(self, ids: np.ndarray, keyframe: int) -> None:
+        """Reset simulations ``ids`` to ``keyframe``, computing nothing (the caller writes the state, then
+        calls :meth:`forward`)."""
+        self.batch.reset(ids=ids, keyframe=keyframe, stage=mujoco.mjtStage.mjSTAGE_NONE)
+
+    def forward(self, ids: np.ndarray | None = None) -> None:
+        """Compute every derived quantity (``mj_forward``) of simulations ``ids`` (all if None)."""
+        self.batch.forward(ids=ids)
+
+    def step(self, nstep: int) -> np.ndarray:
+        """Advance every simulation by ``nstep`` physics steps, then compute the derived quantities of the new
+        state (``mj_forward``); returns the ids of the simulations MuJoCo raised an error in (they keep the
+        state they had before the call, the others ran)."""
+        try:
+            self.batch.step(nstep=nstep, stage=mujoco.mjtStage.mjSTAGE_ACC)
+        except mj_batch.SimulationError as exc:
+            return np.asarray(exc.ids, dtype=np.int64)
+        return np.zeros(0, dtype=np.int64)
+
+    def render_data(self, env: int) -> mujoco.MjData:
+        """An MjData with simulation ``env``'s positions and velocities, forwarded (for rendering)."""
+        data = mujoco.MjData(self.model)
+        data.qpos[:] = self.qpos[env]
+        data.qvel[:] = self.qvel[env]
+        mujoco.mj_forward(self.model, data)
+        return data
+
+    # ------------------------------------------------------------------ state
+    def get_state(self) -> dict[str, Any]:
+        """A copy of everything a restored batch needs to step on identically: the integration state rows
+        (time, qpos, qvel, controls, applied forces, the solver's warm start, ...) and the per-environment
+        model fields."""
+        return {
+            "state": self.batch.state.copy(),
+            "per_env_fields": {name: values.copy() for name, values in self._per_env_fields.items()},
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a :meth:`get_state` of a batch of the same model and size, and recompute the derived
+        quantities (the outputs a step would have left)."""
+        rows = np.asarray(state["state"])
+        if rows.shape != self.batch.state.shape:
+            raise ValueError(
+                f"physics state of shape {rows.shape} does not fit this batch {self.batch.state.shape}: restore it "
+                "into a batch of the same model and number of environments"
+            )
+        for name, values in state["per_env_fields"].items():
+            self.per_env_field(name)[:] = values
+        if SET_CONST_INPUTS & set(state["per_env_fields"]):
+            self.set_const()
+        self.batch.state[:] = rows
+        # MuJoCo's forward pass resets a simulation holding NaN, inf or a value beyond mjMAXVAL (with a warning);
+        # such a state (a diverged one, left for the next step to flag) is restored as it was, not forwarded.
+        sane = (np.abs(self.qpos) < mujoco.mjMAXVAL).all(axis=1) & (np.abs(self.qvel) < mujoco.mjMAXVAL).all(axis=1)
+        if sane.any():
+            self.forward(np.flatnonzero(sane))

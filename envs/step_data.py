@@ -1,0 +1,90 @@
+"""The per-step records of :class:`~margin_rl.envs.core.AnymalCore`: the simulator state it reads, the
+accelerations it estimates, and what a step returns (N environments leading every array), with the check
+that no non-finite output leaves a step."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from margin_rl.envs.config import EnvConfig
+
+
+@dataclass(frozen=True)
+class SimulationState:
+    """World-frame state of some environments, read from the batch's arrays (N leading)."""
+
+    base_pos: np.ndarray  # (N, 3) [m]
+    base_rot: np.ndarray  # (N, 3, 3) R_WB
+    lin_vel_world: np.ndarray  # (N, 3) base linear velocity [m/s]
+    ang_vel_body: np.ndarray  # (N, 3) base angular velocity, base frame [rad/s]
+    ang_vel_world: np.ndarray  # (N, 3) [rad/s]
+    joint_pos: np.ndarray  # (N, 12) [rad]
+    joint_vel: np.ndarray  # (N, 12) [rad/s]
+    com: np.ndarray  # (N, 3) whole-body CoM [m]
+    com_vel: np.ndarray  # (N, 3) [m/s]
+    feet: np.ndarray  # (N, 4, 3) foot-sphere centres [m]
+    contacts: np.ndarray  # (N, 4) bool, foot-terrain contact
+    base_contact: np.ndarray  # (N,) bool
+    thigh_contacts: np.ndarray  # (N, 4) bool
+    knees: np.ndarray  # (N, 4, 3) knee (KFE joint) positions [m]
+
+    def finite(self) -> SimulationState:
+        """The same state with every non-finite float replaced by 0 (a diverged step's bookkeeping)."""
+        changes = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if value.dtype.kind == "f":
+                changes[f.name] = np.where(np.isfinite(value), value, 0.0)
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class Accelerations:
+    """Finite-difference accelerations over the policy step (world frame).
+
+    ``com`` and ``base_angular`` are the filtered estimates lambda is built from; ``com_measured`` and
+    ``base_angular_measured`` the unfiltered differences the info reports (what the comparison's base
+    acceleration metrics measure, whatever the filter).
+    """
+
+    com: np.ndarray  # (N, 3) [m/s^2], EMA-filtered (EnvConfig.acceleration_filter)
+    base_angular: np.ndarray  # (N, 3) [rad/s^2], EMA-filtered
+    joints: np.ndarray  # (N, 12) [rad/s^2], unfiltered
+    com_measured: np.ndarray  # (N, 3) [m/s^2], unfiltered
+    base_angular_measured: np.ndarray  # (N, 3) [rad/s^2], unfiltered
+
+
+@dataclass(frozen=True)
+class StepOutput:
+    """Result of :meth:`AnymalCore.step` for all environments."""
+
+    observation: np.ndarray  # (N, obs) float32, after autoreset for finished environments
+    reward: np.ndarray  # (N,) float64
+    terminated: np.ndarray  # (N,) bool
+    truncated: np.ndarray  # (N,) bool
+    info: dict[str, np.ndarray]  # per-environment arrays (reward_<term>, margin, accelerations, ...)
+    final_observation: np.ndarray  # (N, obs): the observation before autoreset (valid where done)
+    privileged: np.ndarray | None  # (N, priv) critic observation, after autoreset
+
+
+def check_finite_outputs(config: EnvConfig, reward: np.ndarray | float, *observations: np.ndarray) -> None:
+    """FloatingPointError if a reward or an observation is NaN or inf.
+
+    The core keeps diverged simulations finite (and flags them in ``info["diverged"]``); what is left is a
+    setting so large that float arithmetic overflows, which no agent should train on. Checked in the core, so
+    every adapter (Gymnasium, SB3, rsl-rl) gets the same error.
+    """
+    bad_observation = not all(np.all(np.isfinite(o)) for o in observations)
+    if not bad_observation and np.all(np.isfinite(reward)):
+        return
+    rnd = config.randomization
+    raise FloatingPointError(
+        f"the {'observation' if bad_observation else 'reward'} is not finite: an EnvConfig value is too large for "
+        f"float arithmetic (margin_weight={config.margin_weight}, "
+        f"reward_params.alive_bonus={config.reward_params.alive_bonus}, "
+        f"randomization.observation_noise={rnd.observation_noise}, reset_velocity_noise={rnd.reset_velocity_noise}); "
+        "use values of the order of the defaults"
+    )

@@ -29,6 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository r
 import gymnasium as gym
 import mujoco
 import numpy as np
+from gymnasium.vector import AutoresetMode
 from mujoco import batch
 
 import margin_rl  # noqa: F401  (registers the ids)
@@ -36,7 +37,12 @@ from benchmarks.harness import interleave, machine_line, parser, print_table, su
 
 
 def env_runner(env_id: str, num_envs: int, actions: np.ndarray, **kwargs: object) -> Callable[[int], float]:
-    env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **kwargs)
+    # Same-step autoreset: the mode of the training adapters (and of this benchmark's history); next-step
+    # mode costs one more step per episode end (of 1000-step episodes).
+    env = gym.make_vec(
+        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", autoreset_mode=AutoresetMode.SAME_STEP,
+        **kwargs,
+    )
     env.reset(seed=0)
     for a in actions[:20]:  # warm-up
         env.step(a)

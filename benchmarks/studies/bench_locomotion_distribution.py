@@ -24,6 +24,7 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.vector import AutoresetMode
 
 import margin_rl
 from margin_rl.envs.config import CommandConfig, RandomizationConfig
@@ -85,7 +86,9 @@ def table_i_ranges(robot: margin_rl.Robot, t: TableI = TableI()) -> dict[str, tu
 
 
 def rollout_lambdas(env_id: str, options: dict, policy, num_envs: int, steps: int, seed: int) -> np.ndarray:
-    env = gym.make_vec(env_id, num_envs=num_envs, margin="none", **options)
+    # Same-step autoreset: every step's info holds the lambda of a simulated state (next-step mode would add
+    # a masked reset step per episode end with no state).
+    env = gym.make_vec(env_id, num_envs=num_envs, margin="none", autoreset_mode=AutoresetMode.SAME_STEP, **options)
     obs, _ = env.reset(seed=seed)
     lams = []
     for _ in range(steps):

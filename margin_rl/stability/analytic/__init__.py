@@ -8,22 +8,6 @@
                      ICP, wrench), batch-first: one state is a batch of one
     margin           analytic_margin(robot, lam) and analytic_margin_batch (the labelling path)
     extended         the extended margin m_x: m_a continued to states without a Feasible Region
+
+The names users need are exported by :mod:`margin_rl.stability`; the rest from their modules.
 """
-
-from margin_rl.stability.analytic.margin import (
-    STATUSES,
-    AnalyticMarginResult,
-    AnalyticSettings,
-    BatchMargins,
-    analytic_margin,
-    analytic_margin_batch,
-)
-
-__all__ = [
-    "STATUSES",
-    "AnalyticMarginResult",
-    "AnalyticSettings",
-    "BatchMargins",
-    "analytic_margin",
-    "analytic_margin_batch",
-]

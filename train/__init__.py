@@ -1,13 +1,16 @@
 """Training, comparison and evaluation of margin_rl, installed as ``margin_rl.train``.
 
 PPO is never re-implemented here: rsl-rl's ``OnPolicyRunner`` and Stable-Baselines3's ``PPO`` do the learning,
-on thin adapters over the one batched simulation :class:`margin_rl.envs.core.AnymalCore` (ANYmal ids), or,
-for any other registered Gymnasium id (e.g. ``margin_rl/SLIPHopper-v0``), SB3 over ``gymnasium.make``.
+on thin adapters over the one batched simulation :class:`margin_rl.envs.core.AnymalCore`. One environment path:
+the batched ANYmal ids; any other id is refused with an error naming them. Other Gymnasium environments (e.g. the
+SLIP hopper ``margin_rl/SLIPHopper-v0``) are trained with plain Stable-Baselines3, as
+``examples/train_slip_hopper.py`` in the repository shows.
 
 Map (each sub-package imports only the rows above it)::
 
-    environments, config, metrics, runs   the foundation: the environment interface per id, PPO settings,
-                                          episode metrics and their logs, run directories and checkpoints
+    environments, config, metrics, runs   the foundation: the one environment interface (batched ANYmal ids),
+                                          PPO settings, episode metrics and their logs, run directories and
+                                          checkpoints
     backends/    rsl, sb3: each learner's vector-environment adapter and its training loop
     artifacts/   policies (load any saved policy), bundle (policies shipped with a card in bundled/)
     analysis/    episodes (the one evaluation runner), significance (Welch and bootstrap), media (plots, video)

@@ -29,9 +29,7 @@ Acceleration statistics skip the first ``warmup_steps`` of each episode (the lan
 asked to; training logs use every step. An episode that ends within the warm-up has no acceleration sample
 left: its acceleration metrics are NaN, and :func:`not_computed` gives the reason a report prints instead.
 
-:class:`InfoEpisodeStatistics` does the same for any other Gymnasium environment (the generic path): return,
-length, ``reward/<term>`` sums of its ``info["reward_<term>"]`` and ``<key>_mean`` of its other numeric
-``info`` values. :func:`summarize` and :func:`summary_table` turn episodes into reports.
+:func:`summarize` and :func:`summary_table` turn episodes into reports.
 """
 
 from __future__ import annotations
@@ -57,8 +55,6 @@ SUMMARY_METRICS: dict[str, str] = {
 }
 """The comparison table's columns: metric name -> label with unit."""
 ACCELERATION_PREFIXES: tuple[str, ...] = ("lin_acc_", "ang_acc_")
-SB3_INFO_KEYS: frozenset[str] = frozenset({"episode", "terminal_observation", "TimeLimit.truncated"})
-"""``info`` keys added by SB3's ``Monitor`` and ``DummyVecEnv``, not by the environment."""
 
 
 def reward_terms(info: Mapping[str, np.ndarray]) -> tuple[str, ...]:
@@ -190,89 +186,6 @@ class EpisodeStatistics:
             if f"termination_{cause}" in info:
                 metrics[f"termination/{cause}"] = np.asarray(info[f"termination_{cause}"], dtype=float)[ids]
         metrics["timed_out"] = truncated[ids].astype(float)
-        return metrics
-
-
-def _numeric_scalars(info: Mapping[str, Any]) -> dict[str, float]:
-    """The numeric scalar values of an environment's ``info`` (booleans as 0/1), less SB3's own keys."""
-    found: dict[str, float] = {}
-    for key, value in info.items():
-        if key in SB3_INFO_KEYS:
-            continue
-        if isinstance(value, (bool, int, float, np.bool_, np.integer, np.floating)) or (
-            isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "biuf"
-        ):
-            found[key] = float(value)
-    return found
-
-
-class InfoEpisodeStatistics:
-    """Per-environment sums over the running episode of the reward and of the numeric scalars in ``info``.
-
-    :meth:`update` returns, for the episodes that ended, arrays (in environment order, plus ``"env"``: their
-    indices) of ``return`` (sum of the rewards), ``length`` (steps), ``reward/<term>`` (sum of
-    ``info["reward_<term>"]``), ``<key>_mean`` (mean over the episode's steps of every other numeric scalar
-    ``info[key]``, booleans as 0/1; NaN for an episode that never reported it), ``terminated`` and ``timed_out``
-    (1 or 0). Names follow :mod:`margin_rl.train.metrics`, so :func:`~margin_rl.train.metrics.tensorboard_tags`
-    gives their TensorBoard tags.
-    """
-
-    def __init__(self, num_envs: int) -> None:
-        self.num_envs = int(num_envs)
-        self._return = np.zeros(self.num_envs)
-        self._length = np.zeros(self.num_envs, dtype=np.int64)
-        self._sums: list[dict[str, float]] = [{} for _ in range(self.num_envs)]
-        self._counts: list[dict[str, int]] = [{} for _ in range(self.num_envs)]
-
-    def reset(self, ids: Sequence[int] | np.ndarray | None = None) -> None:
-        """Start new episodes in environments ``ids`` (all if None)."""
-        for i in range(self.num_envs) if ids is None else (int(k) for k in ids):
-            self._return[i], self._length[i] = 0.0, 0
-            self._sums[i], self._counts[i] = {}, {}
-
-    def update(
-        self,
-        reward: np.ndarray,
-        infos: Sequence[Mapping[str, Any]],
-        terminated: np.ndarray,
-        truncated: np.ndarray,
-    ) -> dict[str, np.ndarray]:
-        """Add one step of every environment; the metrics of the episodes that ended (empty when none did)."""
-        self._return += np.asarray(reward, dtype=np.float64)
-        self._length += 1
-        for sums, counts, info in zip(self._sums, self._counts, infos, strict=True):
-            for key, value in _numeric_scalars(info).items():
-                sums[key] = sums.get(key, 0.0) + value
-                counts[key] = counts.get(key, 0) + 1
-        terminated, truncated = np.asarray(terminated, dtype=bool), np.asarray(truncated, dtype=bool)
-        ids = np.flatnonzero(terminated | truncated)
-        return self._finish(ids, terminated & ~truncated)
-
-    def close(self, ids: Sequence[int] | np.ndarray) -> dict[str, np.ndarray]:
-        """End the running episodes of ``ids`` without another step (counted as time-outs); their metrics."""
-        return self._finish(np.asarray(ids, dtype=np.int64), np.zeros(self.num_envs, dtype=bool))
-
-    def _episode(self, i: int, terminated: bool) -> dict[str, float]:
-        metrics = {"return": float(self._return[i]), "length": float(self._length[i])}
-        sums, counts = self._sums[i], self._counts[i]
-        for key in sums:  # reward terms are summed like the return; other values averaged over the steps
-            if key.startswith("reward_"):
-                metrics[f"reward/{key.removeprefix('reward_')}"] = sums[key]
-            else:
-                metrics[f"{key}_mean"] = sums[key] / counts[key]
-        metrics["terminated"] = float(terminated)
-        metrics["timed_out"] = float(not terminated)
-        return metrics
-
-    def _finish(self, ids: np.ndarray, terminated: np.ndarray) -> dict[str, np.ndarray]:
-        if ids.size == 0:
-            return {}
-        episodes = [self._episode(int(i), bool(terminated[i])) for i in ids]
-        self.reset(ids)
-        keys = list(dict.fromkeys(k for episode in episodes for k in episode))
-        metrics = {"env": ids.copy()}
-        for key in keys:
-            metrics[key] = np.array([episode.get(key, math.nan) for episode in episodes])
         return metrics
 
 

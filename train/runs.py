@@ -2,7 +2,7 @@
 
 Layout of a run directory::
 
-    <run>/config.json          environment (``env_config`` or ``env_kwargs``), PPO and run settings (read by --resume)
+    <run>/config.json          environment (``env_config``), PPO and run settings (read by --resume)
     <run>/progress.json        steps and iterations done, finished/interrupted, latest checkpoint
     <run>/checkpoints/ckpt_<steps>.pt|.zip   full training state every --checkpoint-every steps and on stop
     <run>/tb/                  TensorBoard events (a resumed run appends to the same folder)
@@ -42,13 +42,11 @@ TORCHSCRIPT_FILE = "policy_torchscript.pt"
 _CKPT = re.compile(r"^ckpt_(\d+)\.(pt|zip)$")
 
 
-def run_name(env_id: str, backend: str, margin_weight: float | None, seed: int, when: float | None = None) -> str:
-    """``<env>__<backend>__mw<weight>__s<seed>__<YYYYmmdd-HHMMSS>`` (the id's namespace dropped; without the
-    ``mw<weight>`` part for an environment that has no margin weight, ``margin_weight`` None)."""
+def run_name(env_id: str, backend: str, margin_weight: float, seed: int, when: float | None = None) -> str:
+    """``<env>__<backend>__mw<weight>__s<seed>__<YYYYmmdd-HHMMSS>`` (the id's namespace dropped)."""
     env = env_id.split("/")[-1].replace(":", "_")
     stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(when if when is not None else time.time()))
-    weight = f"mw{margin_weight:g}__" if margin_weight is not None else ""
-    return f"{env}__{backend}__{weight}s{seed}__{stamp}"
+    return f"{env}__{backend}__mw{margin_weight:g}__s{seed}__{stamp}"
 
 
 def final_model_name(backend: str) -> str:

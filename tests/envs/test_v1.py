@@ -230,10 +230,10 @@ def test_v1_ids_are_registered_and_v0_ids_raise_gymnasiums_deprecation() -> None
 
 
 def test_the_training_package_reads_a_stored_v0_id_as_v1() -> None:
-    from margin_rl.train.environments import env_target, is_batched_anymal, registered_spec
+    from margin_rl.train.environments import anymal_id, env_target, registered_spec
 
     assert registered_spec("margin_rl/AnymalC-Rough-v0").id == "margin_rl/AnymalC-Rough-v1"
-    assert is_batched_anymal("margin_rl/AnymalB-v0")
+    assert anymal_id("margin_rl/AnymalB-v0") == "margin_rl/AnymalB-v1"
     assert env_target("margin_rl/AnymalB-v0", {"margin": "none"}).env_id == "margin_rl/AnymalB-v1"
 
 

@@ -36,7 +36,7 @@ def save_figure(fig: Any, path: str | Path) -> Path:
     return save_plot(fig, path, dpi=110)
 
 
-def _anymal_axes(plt: Any, traj: Mapping[str, np.ndarray]) -> Any:
+def _episode_axes(plt: Any, traj: Mapping[str, np.ndarray]) -> Any:
     """Base accelerations, heading velocity, margin and stance width over time."""
     t = traj["time"]
     fig, axes = plt.subplots(4, 1, figsize=(9, 10), sharex=True)
@@ -61,34 +61,10 @@ def _anymal_axes(plt: Any, traj: Mapping[str, np.ndarray]) -> Any:
     return fig
 
 
-def _generic_axes(plt: Any, traj: Mapping[str, np.ndarray], max_observations: int) -> Any:
-    """Reward (and its ``reward_<term>`` parts) and the first observation components over the steps."""
-    step = traj["step"]
-    style = {"marker": "." if step.size < 60 else None, "lw": 0.9}  # short episodes: show the points
-    fig, axes = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
-    axes[0].plot(step, traj["reward"], color="black", label="reward", **style)
-    for key in sorted(k for k in traj if k.startswith("reward_")):
-        axes[0].plot(step, traj[key], label=key.removeprefix("reward_"), **style)
-    axes[0].set_ylabel("reward per step")
-    observation = traj["observation"]
-    for k in range(min(observation.shape[1] if observation.ndim == 2 else 0, max_observations)):
-        axes[1].plot(step, observation[:, k], label=f"obs[{k}]", **style)
-    axes[1].set_ylabel("observation (acted on)")
-    axes[1].set_xlabel("step")
-    for ax in axes:
-        ax.grid(alpha=0.3)
-        if ax.lines:
-            ax.legend(loc="upper right", fontsize=8)
-    return fig
-
-
-def plot_episode(evaluation: Evaluation, path: str | Path, title: str = "", max_observations: int = 12) -> Path:
-    """The first episode of an evaluation (PNG): for ANYmal (a ``time`` axis) base accelerations, heading velocity,
-    margin and stance width; for a generic environment (a ``step`` axis) the reward with its ``reward_<term>``
-    parts and the first ``max_observations`` observation components."""
+def plot_episode(evaluation: Evaluation, path: str | Path, title: str = "") -> Path:
+    """The first episode of an evaluation (PNG): base accelerations, heading velocity, margin and stance width."""
     plt = _pyplot()
-    traj = evaluation.trajectory
-    fig = _anymal_axes(plt, traj) if "time" in traj else _generic_axes(plt, traj, max_observations)
+    fig = _episode_axes(plt, evaluation.trajectory)
     fig.suptitle(title or "evaluation episode")
     return save_figure(fig, path)
 

@@ -10,8 +10,8 @@ Kinds (recognised from the file's contents, not its name):
 * ``torchscript``: an exported actor (``policy_torchscript.pt``, also rsl-rl's ``export_policy_to_jit``).
 
 Every kind becomes a :class:`LoadedPolicy`: ``policy(obs)`` maps (N, obs) float32 to deterministic actions
-(N, actions), e.g. (N, 12) for ANYmal, (N, 2) for ``margin_rl/SLIPHopper-v0``. :meth:`LoadedPolicy.check`
-raises :class:`PolicyMismatchError` when the observation or action size differs from the environment's.
+(N, 12). :meth:`LoadedPolicy.check` raises :class:`PolicyMismatchError` when the observation or action size
+differs from the environment's.
 """
 
 from __future__ import annotations
@@ -122,10 +122,7 @@ def _run_config(path: Path) -> dict[str, Any] | None:
     except ValueError:
         return None
     keys = {"env_id", "backend", "backend_config"}
-    if not isinstance(data, dict) or not keys <= set(data):
-        return None
-    # ANYmal runs keep their EnvConfig, runs on other environments their gymnasium.make keywords
-    return data if "env_config" in data or "env_kwargs" in data else None
+    return data if isinstance(data, dict) and keys <= set(data) else None
 
 
 def _load_sb3(path: Path, run_config: dict[str, Any] | None) -> LoadedPolicy:

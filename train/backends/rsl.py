@@ -6,7 +6,7 @@ exact resume and stop.
 ``"critic"``; ``num_envs``, ``num_actions``, ``max_episode_length``, a writable ``episode_length_buf`` shared with
 the core, ``device``, ``cfg``; ``step`` returns ``(obs, rewards, dones, extras)`` with ``extras["time_outs"]``
 and ``extras["log"]``: the TensorBoard tags of :class:`~margin_rl.train.metrics.EpisodeStatistics`, the same as
-the SB3 backend's). :func:`make_rsl_env` builds one from a registered id. rsl-rl trains the ANYmal ids only.
+the SB3 backend's). :func:`make_rsl_env` builds one from a registered id.
 
 PPO itself is rsl-rl's. :class:`CheckpointingRunner` only changes where and how checkpoints are written
 (``<run>/checkpoints/ckpt_<steps>.pt`` via a temporary file, with the training config, the progress and the
@@ -41,7 +41,7 @@ from tensordict import TensorDict
 from margin_rl.atomic import atomic_write
 from margin_rl.envs.core import AnymalCore
 from margin_rl.train.config import to_dict
-from margin_rl.train.environments import ACTION_SIZE, AnymalTarget, EnvTarget, anymal_config, make_core
+from margin_rl.train.environments import ACTION_SIZE, AnymalTarget, anymal_config, make_core
 from margin_rl.train.metrics import EpisodeStatistics, step_tags, tensorboard_tags
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
@@ -112,14 +112,8 @@ class RslVecEnv(VecEnv):
         return self._obs, rewards, dones, extras
 
 
-def rsl_vec_env(target: EnvTarget, num_envs: int, seed: int | None, device: str = "cpu") -> RslVecEnv:
-    """The training ``VecEnv`` of an environment target: :class:`RslVecEnv` over the batched core (ANYmal only).
-
-    Raises:
-        ValueError: a generic target (rsl-rl trains the ANYmal ids only; the SB3 backend trains the others).
-    """
-    if not isinstance(target, AnymalTarget):
-        raise ValueError(f"{target.env_id}: the rsl backend trains the batched ANYmal ids only; use --backend sb3")
+def rsl_vec_env(target: AnymalTarget, num_envs: int, seed: int | None, device: str = "cpu") -> RslVecEnv:
+    """The training ``VecEnv`` of an environment target: :class:`RslVecEnv` over the batched core."""
     return RslVecEnv(make_core(target.config, num_envs, seed), device)
 
 
@@ -142,12 +136,10 @@ def make_rsl_env(
         OnPolicyRunner(env, RslPPOConfig().runner_cfg(False, 50), log_dir=None).learn(100)
 
     Raises:
-        ValueError: ``env_id`` is not a batched margin_rl ANYmal id (rsl-rl trains only those; train the others
-            with SB3); the learned margin's weights cannot be loaded.
+        ValueError: ``env_id`` is not a batched margin_rl ANYmal id; the learned margin's weights cannot be loaded.
         TypeError: an option that is not an EnvConfig field, or a badly typed value.
     """
-    instead = "rsl-rl trains only those here; train other ids with Stable-Baselines3 (margin-rl-train --backend sb3)"
-    config = anymal_config(env_id, env_options, "make_rsl_env", instead)
+    config = anymal_config(env_id, env_options, "make_rsl_env")
     return RslVecEnv(make_core(config, num_envs, seed), device)
 
 

@@ -1,24 +1,16 @@
-"""Stable-Baselines3: the ``VecEnv`` adapters and PPO training, with atomic checkpoints, exact resume, stop at a
+"""Stable-Baselines3: the ``VecEnv`` adapter and PPO training, with atomic checkpoints, exact resume, stop at a
 rollout boundary.
 
-Environments (:func:`sb3_vec_env` picks one for an :class:`~margin_rl.train.environments.EnvTarget`):
+:class:`Sb3VecEnv` is a ``VecEnv`` over the batched ANYmal core :class:`margin_rl.envs.core.AnymalCore` (numpy
+observations, ``dones``, a list of info dicts with ``terminal_observation``, ``TimeLimit.truncated``, ``episode``
+= {r, l, t} and ``episode_metrics`` on the step that ends an episode; same-step autoreset, as SB3 expects),
+recording :class:`~margin_rl.train.metrics.EpisodeStatistics`; :func:`sb3_vec_env` builds one for an
+:class:`~margin_rl.train.environments.AnymalTarget`, :func:`make_sb3_env` from a registered id for plain SB3 use.
 
-* :class:`Sb3VecEnv`: a ``VecEnv`` over the batched ANYmal core :class:`margin_rl.envs.core.AnymalCore`
-  (numpy observations, ``dones``, a list of info dicts with ``terminal_observation``, ``TimeLimit.truncated``,
-  ``episode`` = {r, l, t} and ``episode_metrics`` on the step that ends an episode; same-step autoreset, as SB3
-  expects), recording :class:`~margin_rl.train.metrics.EpisodeStatistics`; :func:`make_sb3_env` builds one
-  from a registered id for plain SB3 use;
-* :class:`Sb3GymVecEnv` (:func:`make_gym_vec_env`): SB3's ``DummyVecEnv`` of ``gymnasium.make(id, **env_kwargs)``
-  environments (generic path), each in SB3's ``Monitor`` and seeded ``seed + index`` at the first reset,
-  recording :class:`~margin_rl.train.metrics.InfoEpisodeStatistics`.
-
-Both are episode-metrics sources (:class:`EpisodeMetricsSource`). PPO itself is SB3's; :class:`TrainingCallback`
-logs those metrics (for ANYmal the same TensorBoard tags as the rsl-rl backend; for a generic environment
-``Episode_Metrics/return``, ``/length``, the means of its numeric ``info`` values and ``Episode_Reward/<term>``
-for its ``info["reward_<term>"]``), throughput, drives the progress bar, writes
-``<run>/checkpoints/ckpt_<steps>.zip`` every ``checkpoint_every`` steps at the start of a rollout (after the
-previous update, a consistent state) and, when a stop is requested, writes one there and ends ``learn`` before
-any new data is collected.
+PPO itself is SB3's; :class:`TrainingCallback` logs those metrics (the same TensorBoard tags as the rsl-rl
+backend), throughput, drives the progress bar, writes ``<run>/checkpoints/ckpt_<steps>.zip`` every
+``checkpoint_every`` steps at the start of a rollout (after the previous update, a consistent state) and, when a
+stop is requested, writes one there and ends ``learn`` before any new data is collected.
 
 Warm start (``init_from``): a new model begins with the policy weights of a trained one of the same shapes (its
 optimizer, step count and schedules are the new run's).
@@ -34,23 +26,21 @@ The TorchScript export is the deterministic actor: the Gaussian mean clipped to 
 from __future__ import annotations
 
 import copy
-import functools
 import io
 import logging
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.save_util import load_from_zip_file
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecEnvWrapper
+from stable_baselines3.common.vec_env import VecEnv
 
 from margin_rl.atomic import atomic_write
 from margin_rl.envs.core import AnymalCore
@@ -58,19 +48,11 @@ from margin_rl.train.config import Sb3PPOConfig
 from margin_rl.train.environments import (
     ACTION_SIZE,
     AnymalTarget,
-    EnvTarget,
     anymal_config,
     make_core,
-    make_gym_env,
     observation_size,
 )
-from margin_rl.train.metrics import (
-    EpisodeStatistics,
-    InfoEpisodeStatistics,
-    split_episodes,
-    step_tags,
-    tensorboard_tags,
-)
+from margin_rl.train.metrics import EpisodeStatistics, split_episodes, step_tags, tensorboard_tags
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
     TORCHSCRIPT_FILE,
@@ -85,17 +67,6 @@ UNPICKLE_WARNING = (
     "{path}: Stable-Baselines3 .zip files are loaded with pickle (which can run arbitrary code); "
     "only load policies from a source you trust"
 )
-
-
-class EpisodeMetricsSource(Protocol):
-    """What :class:`TrainingCallback` reads from the SB3 ``VecEnv`` after each step."""
-
-    num_envs: int
-    stats_finished: dict[str, np.ndarray]  # metrics of the episodes that ended at the last step (arrays, "env")
-
-    def step_summary(self) -> dict[str, float]:
-        """TensorBoard tag -> value of per-step statistics over the batch of the last step."""
-        ...
 
 
 class Sb3VecEnv(VecEnv):
@@ -184,46 +155,9 @@ class Sb3VecEnv(VecEnv):
         return [False for _ in self._indices(indices)]
 
 
-class Sb3GymVecEnv(VecEnvWrapper):
-    """SB3 ``VecEnv`` wrapper recording :class:`InfoEpisodeStatistics` over ``venv`` (SB3 ``Monitor``-wrapped
-    Gymnasium environments, see :func:`make_gym_vec_env`); steps, observations and infos pass unchanged."""
-
-    def __init__(self, venv: VecEnv) -> None:
-        super().__init__(venv)
-        self.stats = InfoEpisodeStatistics(venv.num_envs)
-        self.stats_finished: dict[str, np.ndarray] = {}
-
-    def reset(self) -> np.ndarray:
-        self.stats.reset()
-        self.stats_finished = {}
-        return self.venv.reset()
-
-    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
-        obs, rewards, dones, infos = self.venv.step_wait()
-        # SB3 marks time-limit ends (truncated and not terminated) in the info of the ending step
-        truncated = np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
-        terminated = np.asarray(dones, dtype=bool) & ~truncated
-        self.stats_finished = self.stats.update(rewards, infos, terminated, truncated)
-        return obs, rewards, dones, infos
-
-    def step_summary(self) -> dict[str, float]:
-        """No per-step statistics: a generic environment's ``info`` has no known layout (episode metrics only)."""
-        return {}
-
-
-def make_gym_vec_env(env_id: str, kwargs: Mapping[str, Any], num_envs: int, seed: int | None) -> Sb3GymVecEnv:
-    """``num_envs`` environments ``gymnasium.make(env_id, **kwargs)`` in SB3's ``DummyVecEnv``, each in a
-    ``Monitor`` (episode returns for SB3's own ``rollout/`` logs), seeded ``seed + index`` at the first reset."""
-    make = functools.partial(make_gym_env, env_id, dict(kwargs))
-    return Sb3GymVecEnv(make_vec_env(make, n_envs=num_envs, seed=seed, vec_env_cls=DummyVecEnv))
-
-
-def sb3_vec_env(target: EnvTarget, num_envs: int, seed: int | None) -> Sb3VecEnv | Sb3GymVecEnv:
-    """The training ``VecEnv`` of an environment target: :class:`Sb3VecEnv` over the batched core for ANYmal,
-    :func:`make_gym_vec_env` for any other id."""
-    if isinstance(target, AnymalTarget):
-        return Sb3VecEnv(make_core(target.config, num_envs, seed))
-    return make_gym_vec_env(target.env_id, target.kwargs, num_envs, seed)
+def sb3_vec_env(target: AnymalTarget, num_envs: int, seed: int | None) -> Sb3VecEnv:
+    """The training ``VecEnv`` of an environment target: :class:`Sb3VecEnv` over the batched core."""
+    return Sb3VecEnv(make_core(target.config, num_envs, seed))
 
 
 def make_sb3_env(env_id: str, num_envs: int, seed: int | None = None, **env_options: Any) -> Sb3VecEnv:
@@ -242,12 +176,11 @@ def make_sb3_env(env_id: str, num_envs: int, seed: int | None = None, **env_opti
         PPO("MlpPolicy", env, n_steps=24).learn(100_000)
 
     Raises:
-        ValueError: ``env_id`` is not a batched margin_rl ANYmal id (for others, SB3's own ``make_vec_env``);
-            the learned margin's weights cannot be loaded.
+        ValueError: ``env_id`` is not a batched margin_rl ANYmal id (other Gymnasium environments: plain SB3, see
+            ``examples/train_slip_hopper.py``); the learned margin's weights cannot be loaded.
         TypeError: an option that is not an EnvConfig field, or a badly typed value.
     """
-    instead = f"build it with stable_baselines3.common.env_util.make_vec_env({env_id!r}, n_envs={num_envs})"
-    config = anymal_config(env_id, env_options, "make_sb3_env", instead)
+    config = anymal_config(env_id, env_options, "make_sb3_env")
     return Sb3VecEnv(make_core(config, num_envs, seed))
 
 
@@ -267,7 +200,7 @@ def save_model(model: PPO, path: Path) -> Path:
 class TrainingCallback(BaseCallback):
     """Metrics, progress, checkpoints and stop requests for SB3's PPO (see the module docstring)."""
 
-    def __init__(self, venv: EpisodeMetricsSource, run_dir: Path, checkpoint_every: int, hooks: RunHooks) -> None:
+    def __init__(self, venv: Sb3VecEnv, run_dir: Path, checkpoint_every: int, hooks: RunHooks) -> None:
         super().__init__(verbose=0)
         self.venv, self.run_dir, self.every, self.hooks = venv, run_dir, max(1, int(checkpoint_every)), hooks
         self.stopped = False
@@ -332,7 +265,7 @@ def make_model(venv: VecEnv, ppo: Sb3PPOConfig, seed: int, device: str) -> PPO:
 class _DeterministicActor(torch.nn.Module):
     """SB3 MlpPolicy's deterministic action (the Gaussian mean, clipped to the action box) for TorchScript.
 
-    The bounds are those of the model's ``Box`` action space ([-1, 1] for ANYmal), as in SB3's ``predict``.
+    The bounds are those of the model's ``Box`` action space ([-1, 1]), as in SB3's ``predict``.
     """
 
     def __init__(self, policy: Any, action_space: Any) -> None:
@@ -348,13 +281,7 @@ class _DeterministicActor(torch.nn.Module):
 
 
 def export_torchscript(model: PPO, path: Path) -> Path:
-    """Trace the deterministic actor into a TorchScript file (input: (N, obs) float32; output: (N, actions)).
-
-    Raises:
-        ValueError: the model's action space is not a ``Box`` (no Gaussian mean to export).
-    """
-    if not isinstance(model.action_space, spaces.Box):
-        raise ValueError(f"TorchScript export needs a Box action space, the model has {model.action_space}")
+    """Trace the deterministic actor into a TorchScript file (input: (N, obs) float32; output: (N, actions))."""
     actor = _DeterministicActor(model.policy, model.action_space).eval()
     example = torch.zeros(1, int(model.observation_space.shape[0]))
     buffer = io.BytesIO()
@@ -393,7 +320,7 @@ def warm_start(model: PPO, path: Path) -> None:
 
 
 def train_sb3(
-    venv: VecEnv,
+    venv: Sb3VecEnv,
     ppo: Sb3PPOConfig,
     run_dir: Path,
     seed: int,
@@ -407,8 +334,8 @@ def train_sb3(
 ) -> tuple[int, bool, Path | None]:
     """Run (or continue) SB3 PPO up to ``total_steps``; returns (env steps, stopped, TorchScript path).
 
-    ``venv`` must also be an :class:`EpisodeMetricsSource` (read by the callback). ``init_from``: a trained SB3
-    model whose weights a new run starts from (:func:`warm_start`); ignored when continuing a checkpoint.
+    ``init_from``: a trained SB3 model whose weights a new run starts from (:func:`warm_start`); ignored when
+    continuing a checkpoint.
     """
     if checkpoint is not None:
         warn_unpickling(checkpoint)

@@ -1,9 +1,9 @@
 """Command-line options and defaults shared by ``train``, ``evaluate`` and ``compare``.
 
 :func:`add_env_arguments` adds the options that shape the environment, :func:`env_overrides` turns them into
-option overrides (EnvConfig fields for the ANYmal ids, constructor keywords for the others).
+EnvConfig field overrides.
 
-Training defaults of the command line (``train`` and ``compare``, ANYmal ids only): the shipped, working
+Training defaults of the command line (``train`` and ``compare``): the shipped, working
 experiment of the README and ``bundled/anymal_b_v1/CARD.md``, margin weight :data:`CLI_MARGIN_WEIGHT` and
 ``reward_params.alive_bonus`` :data:`CLI_ALIVE_BONUS` (:func:`with_training_defaults`). ``EnvConfig``'s own
 defaults (the paper's reward: weight 1, no bonus) stay what the Python API and the environments use: with them, a
@@ -18,7 +18,7 @@ from typing import Any
 
 from margin_rl.envs.margin_kinds import MARGIN_KINDS
 from margin_rl.train.config import parse_assignments
-from margin_rl.train.environments import DEFAULT_ENV, is_batched_anymal
+from margin_rl.train.environments import DEFAULT_ENV, anymal_id
 
 CLI_MARGIN_WEIGHT = 0.2
 """Margin-reward weight of ``train`` (and of ``compare``'s margin variant) unless ``--margin-weight`` is given."""
@@ -26,7 +26,7 @@ CLI_ALIVE_BONUS = 0.1
 """``reward_params.alive_bonus`` of ``train`` and ``compare`` unless ``--env-option reward_params.alive_bonus=...``
 (or a ``reward_params`` mapping naming ``alive_bonus``) is given."""
 DEFAULTS_HELP = (
-    f"ANYmal ids default to the shipped experiment: --margin-weight {CLI_MARGIN_WEIGHT:g} and "
+    f"the shipped experiment: --margin-weight {CLI_MARGIN_WEIGHT:g} and "
     f"--env-option reward_params.alive_bonus={CLI_ALIVE_BONUS:g} (EnvConfig's own defaults, weight 1 and no bonus, "
     "make PPO learn to fall)"
 )
@@ -34,17 +34,16 @@ DEFAULTS_HELP = (
 
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:
     """Options that shape the environment (``train``, ``evaluate``, ``compare``)."""
-    parser.add_argument("--env", default=None, help=f"registered environment id (default {DEFAULT_ENV})")
-    parser.add_argument("--margin", choices=tuple(MARGIN_KINDS), help="margin used by the env (ANYmal)")
-    parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (ANYmal; default: bundled)")
-    parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (ANYmal; default paper)")
+    parser.add_argument("--env", default=None, help=f"margin_rl ANYmal id (default {DEFAULT_ENV})")
+    parser.add_argument("--margin", choices=tuple(MARGIN_KINDS), help="margin used by the env")
+    parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (default: bundled)")
+    parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (default paper)")
     parser.add_argument(
         "--env-option",
         action="append",
         metavar="KEY=VALUE",
-        help="ANYmal ids: any EnvConfig field, e.g. command='{\"forward_velocity\": [0.5, 1.0]}', or one entry of "
-        "a mapping field, e.g. reward_params.alive_bonus=0.1; other ids: a constructor keyword of the environment "
-        "or max_episode_steps, e.g. goal_velocity=0.5. VALUE in JSON (repeatable)",
+        help="any EnvConfig field, e.g. command='{\"forward_velocity\": [0.5, 1.0]}', or one entry of a mapping "
+        "field, e.g. reward_params.alive_bonus=0.1. VALUE in JSON (repeatable)",
     )
 
 
@@ -60,15 +59,14 @@ def env_overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def with_training_defaults(env_id: str, overrides: Mapping[str, Any], margin_weight: bool = True) -> dict[str, Any]:
-    """``overrides`` with the command line's training defaults filled in for an ANYmal id (unchanged for others):
-    ``reward_params.alive_bonus`` :data:`CLI_ALIVE_BONUS` and, with ``margin_weight``, ``margin_weight``
-    :data:`CLI_MARGIN_WEIGHT`, unless given (the other ``reward_params`` entries given are kept).
+    """``overrides`` with the command line's training defaults filled in: ``reward_params.alive_bonus``
+    :data:`CLI_ALIVE_BONUS` and, with ``margin_weight``, ``margin_weight`` :data:`CLI_MARGIN_WEIGHT`, unless given
+    (the other ``reward_params`` entries given are kept).
 
     Raises:
-        ValueError: the id is not registered.
+        ValueError: ``env_id`` is not a batched ANYmal id (:func:`~margin_rl.train.environments.anymal_id`).
     """
-    if not is_batched_anymal(env_id):
-        return dict(overrides)
+    anymal_id(env_id)
     defaults = {"margin_weight": CLI_MARGIN_WEIGHT} if margin_weight else {}
     params = overrides.get("reward_params", {})
     if isinstance(params, Mapping):  # anything else is passed on, for the config check to name

@@ -179,8 +179,6 @@ def policy_pushes(
     with torch_threads(1):  # see margin_rl.train.runs.torch_threads
         for velocity in protocol.forward_velocities:
             target = evaluation_target(policy, None, env_overrides, velocity)
-            if not isinstance(target, AnymalTarget):
-                raise ValueError(f"{policy_path}: push recovery needs an ANYmal environment, got {target.env_id}")
             for direction in protocol.directions:
                 curves.append(run_pushes(policy, target, protocol, direction))
     return PolicyPushes(str(policy_path), seed, tuple(curves))

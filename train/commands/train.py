@@ -1,4 +1,4 @@
-"""``train``: PPO (rsl-rl or Stable-Baselines3) on a margin_rl ANYmal environment or any Gymnasium id.
+"""``train``: PPO (rsl-rl or Stable-Baselines3) on a margin_rl ANYmal environment.
 
 Examples::
 
@@ -9,29 +9,22 @@ Examples::
     python -m margin_rl.train train --resume runs/baseline --total-steps 10000000   # ... and extend it
     python -m margin_rl.train train --env margin_rl/AnymalB-Rough-v1 --margin-weight 0 --total-steps 3000000 \
         --init-from runs/baseline/final_model.pt --run-dir runs/baseline_rough    # fine-tune a flat policy
-    python -m margin_rl.train train --env margin_rl/SLIPHopper-v0 --backend sb3 --margin-weight 0.5 \\
-        --num-envs 8 --total-steps 20000 --env-option goal_velocity=0.5
 
-Environments: the ANYmal ids (batched ``vector_entry_point``) run on the batched core with an ``EnvConfig``
-(``--env-option`` sets its fields; ``--margin``, ``--margin-weights``, ``--reward-preset``, ``--margin-weight``
-too), with either backend. Every other registered id takes the generic path (SB3 only, the default backend
-there; ``--backend rsl`` is an error): SB3's ``DummyVecEnv`` of ``gymnasium.make(id, **env_kwargs)``, where
-``--env-option KEY=VALUE`` sets a constructor keyword of the environment (or ``max_episode_steps``) and
-``--margin-weight`` its ``margin_weight`` keyword when it has one (``margin_rl/SLIPHopper-v0`` does); other
-names are an error listing the keywords it takes. See :mod:`margin_rl.train.environments`.
+Environments: the batched ANYmal ids (``vector_entry_point`` of the batched core), each with an ``EnvConfig``:
+``--env-option`` sets its fields, and ``--margin``, ``--margin-weights``, ``--reward-preset``, ``--margin-weight``
+too. Any other id is an error naming the ANYmal ids: other Gymnasium environments, e.g. the SLIP hopper, are
+trained with plain Stable-Baselines3 (``examples/train_slip_hopper.py``). See :mod:`margin_rl.train.environments`.
 
-Defaults for the ANYmal ids: the shipped, working experiment of the README and ``bundled/anymal_b_v1/CARD.md``,
+Defaults: the shipped, working experiment of the README and ``bundled/anymal_b_v1/CARD.md``,
 ``--margin-weight 0.2`` and ``--env-option reward_params.alive_bonus=0.1`` unless given
 (:mod:`margin_rl.train.commands.options`; ``make_spec`` and ``EnvConfig`` keep the paper's reward: weight 1, no
 bonus).
 
-Each run directory (default ``runs/<env>__<backend>__mw<weight>__s<seed>__<time>``, without ``mw<weight>``
-for an environment without a margin weight) holds ``config.json`` (environment: ``env_config`` for ANYmal,
-``env_kwargs`` otherwise; PPO and run settings, package versions; ``--resume`` and ``evaluate`` rebuild the
-environment from it), TensorBoard events in ``tb/`` (ANYmal: every reward term, the margin, base linear/angular
-acceleration RMS and peak per axis, velocity-tracking error, stance width, terminations; generic: episode
-return and length, ``Episode_Reward/<term>`` for every ``info["reward_<term>"]``, means of the other numeric
-``info`` values, terminations; both: throughput and SB3's or rsl-rl's own losses), checkpoints in
+Each run directory (default ``runs/<env>__<backend>__mw<weight>__s<seed>__<time>``) holds ``config.json``
+(the environment's ``env_config``, PPO and run settings, package versions; ``--resume`` and ``evaluate`` rebuild
+the environment from it), TensorBoard events in ``tb/`` (every reward term, the margin, base linear/angular
+acceleration RMS and peak per axis, velocity-tracking error, stance width, terminations, throughput and SB3's
+or rsl-rl's own losses), checkpoints in
 ``checkpoints/`` (every ``--checkpoint-every`` steps, and on SIGINT/SIGTERM), and at the end
 ``final_model.pt|.zip`` plus ``policy_torchscript.pt`` (deterministic actor). See :mod:`margin_rl.train.runs`
 for the layout.
@@ -40,7 +33,6 @@ for the layout.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import signal
 import sys
@@ -69,14 +61,7 @@ from margin_rl.train.config import (
     parse_assignments,
     to_dict,
 )
-from margin_rl.train.environments import (
-    DEFAULT_ENV,
-    AnymalTarget,
-    EnvTarget,
-    GymTarget,
-    env_target,
-    is_batched_anymal,
-)
+from margin_rl.train.environments import DEFAULT_ENV, AnymalTarget, anymal_id, check_margin_available, env_target
 from margin_rl.train.runs import (
     CONFIG_FILE,
     PROGRESS_FILE,
@@ -94,56 +79,36 @@ from margin_rl.train.runs import (
     write_json,
 )
 
-DEFAULT_BACKEND = "rsl"  # for ANYmal ids; the generic path has only "sb3"
-GENERIC_BACKEND = "sb3"
+DEFAULT_BACKEND = "rsl"
 DEFAULT_SEED = 1
 DEFAULT_NUM_ENVS = 128
 DEFAULT_TOTAL_STEPS = 5_000_000
 DEFAULT_CHECKPOINT_EVERY = 500_000
 
 
-def _generic_backend_error(env_id: str, backend: str) -> ValueError:
-    return ValueError(
-        f"{env_id} is not a batched margin_rl ANYmal environment, and the {backend} backend trains only those: "
-        f"train it with --backend {GENERIC_BACKEND}"
-    )
-
-
 @dataclass(frozen=True)
 class TrainSpec:
-    """Everything that defines a training run (written to ``config.json``).
-
-    The environment is either a batched ANYmal one, ``env_config`` (``EnvConfig()`` when neither is given), or
-    a generic Gymnasium one, ``env_kwargs``: the keyword overrides of ``gymnasium.make(env_id, ...)`` (JSON
-    values, copied; see :func:`margin_rl.train.environments.env_kwargs_for`). Build specs with :func:`make_spec`,
-    which picks the kind from the id's registration.
-    """
+    """Everything that defines a training run (written to ``config.json``): a batched ANYmal id and its
+    ``env_config`` (``EnvConfig()`` when not given), PPO and run settings. Build specs with :func:`make_spec`."""
 
     env_id: str = DEFAULT_ENV
     backend: str = DEFAULT_BACKEND
     seed: int = DEFAULT_SEED
     num_envs: int = DEFAULT_NUM_ENVS
     total_steps: int = DEFAULT_TOTAL_STEPS  # environment steps (policy steps summed over environments)
-    env_config: EnvConfig | None = None  # ANYmal ids
+    env_config: EnvConfig | None = None
     ppo: PPOConfig = field(default_factory=RslPPOConfig)
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY  # environment steps between checkpoints
     device: str = "cpu"  # learner device (the simulation always runs on the CPU)
-    env_kwargs: dict[str, Any] | None = field(default=None, hash=False)  # other ids (a dict cannot be hashed)
     # Warm start: the network weights of this trained model (rsl-rl .pt checkpoint or final model, SB3 .zip) are the
     # run's first weights; steps, optimizer and learning-rate schedule start fresh. None: random initialisation.
     init_from: str | None = None
 
     def __post_init__(self) -> None:
-        if self.env_config is not None and self.env_kwargs is not None:
-            raise ValueError("a TrainSpec has either env_config (ANYmal ids) or env_kwargs (other ids), not both")
-        if self.env_kwargs is None and self.env_config is None:
+        if self.env_config is None:
             object.__setattr__(self, "env_config", EnvConfig())  # frozen: set once, here
-        if self.env_kwargs is not None:  # a private JSON copy: the spec never shares the caller's dict
-            object.__setattr__(self, "env_kwargs", json.loads(json.dumps(self.env_kwargs, allow_nan=False)))
         if self.backend not in BACKENDS:
             raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
-        if self.env_kwargs is not None and self.backend != GENERIC_BACKEND:
-            raise _generic_backend_error(self.env_id, self.backend)
         expected = RslPPOConfig if self.backend == "rsl" else Sb3PPOConfig
         if not isinstance(self.ppo, expected):
             raise TypeError(f"backend {self.backend!r} needs a {expected.__name__}, got {type(self.ppo).__name__}")
@@ -154,16 +119,9 @@ class TrainSpec:
             raise TypeError(f"init_from must be None or a path (str), got {self.init_from!r}")
 
     @property
-    def is_anymal(self) -> bool:
-        """True for a batched ANYmal environment (``env_config``), False for a generic one (``env_kwargs``)."""
-        return self.env_kwargs is None
-
-    @property
-    def target(self) -> EnvTarget:
-        """The spec's environment: :class:`AnymalTarget` (``env_config``) or :class:`GymTarget` (``env_kwargs``)."""
-        if self.is_anymal:
-            return AnymalTarget(self.env_id, self.env_config)
-        return GymTarget(self.env_id, dict(self.env_kwargs))
+    def target(self) -> AnymalTarget:
+        """The spec's environment."""
+        return AnymalTarget(self.env_id, self.env_config)
 
     @property
     def steps_per_iteration(self) -> int:
@@ -182,8 +140,7 @@ class TrainSpec:
 
     def backend_config(self, run: str = "") -> dict[str, Any]:
         """The exact settings handed to the backend (the rsl-rl ``train_cfg`` or SB3's PPO keyword arguments)."""
-        if isinstance(self.ppo, RslPPOConfig):  # rsl runs are ANYmal runs (__post_init__)
-            assert self.env_config is not None
+        if isinstance(self.ppo, RslPPOConfig):
             return self.ppo.runner_cfg(self.env_config.privileged_observations, self.save_interval, run)
         kwargs = self.ppo.ppo_kwargs(self.num_envs)
         policy = dict(kwargs.pop("policy_kwargs"))
@@ -191,8 +148,7 @@ class TrainSpec:
         return {**kwargs, "policy_kwargs": policy}
 
     def to_json(self) -> dict[str, Any]:
-        """JSON-ready dict: ``env_config`` for an ANYmal run (as before generic runs existed), else ``env_kwargs``."""
-        env = self.target.to_json()
+        """JSON-ready dict (``config.json``)."""
         return {
             "env_id": self.env_id,
             "backend": self.backend,
@@ -202,20 +158,22 @@ class TrainSpec:
             "checkpoint_every": self.checkpoint_every,
             "device": self.device,
             "init_from": self.init_from,
-            **env,
+            "env_config": to_dict(self.env_config),
             "ppo": to_dict(self.ppo),
         }
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> TrainSpec:
-        """Inverse of :meth:`to_json`; also reads the ``config.json`` of runs older than ``env_kwargs``."""
+        """Inverse of :meth:`to_json`.
+
+        Raises:
+            ValueError: the run's id is not a batched ANYmal id, or its config has no ``env_config``.
+        """
         backend = data["backend"]
         ppo_class = RslPPOConfig if backend == "rsl" else Sb3PPOConfig
-        env_kwargs = data.get("env_kwargs")
-        if env_kwargs is None and data.get("env_config") is None:
-            raise ValueError("run config has neither env_config (ANYmal) nor env_kwargs (other environments)")
-        if env_kwargs is not None and not isinstance(env_kwargs, dict):
-            raise TypeError(f"env_kwargs: expected a mapping, got {env_kwargs!r}")
+        if data.get("env_config") is None:
+            anymal_id(data["env_id"])  # e.g. a run of another environment: the clear error
+            raise ValueError(f"run config of {data['env_id']} has no env_config")
         return cls(
             env_id=data["env_id"],
             backend=backend,
@@ -224,8 +182,7 @@ class TrainSpec:
             total_steps=int(data["total_steps"]),
             checkpoint_every=int(data["checkpoint_every"]),
             device=str(data.get("device", "cpu")),
-            env_config=None if env_kwargs is not None else from_dict(EnvConfig, data["env_config"], "env_config"),
-            env_kwargs=env_kwargs,
+            env_config=from_dict(EnvConfig, data["env_config"], "env_config"),
             ppo=from_dict(ppo_class, data["ppo"], "ppo"),
             init_from=data.get("init_from"),  # absent in runs recorded before warm starts existed
         )
@@ -250,15 +207,6 @@ class TrainResult:
         return self.session_steps / self.elapsed_s if self.elapsed_s > 0 else 0.0
 
 
-def default_backend(env_id: str) -> str:
-    """``rsl`` (:data:`DEFAULT_BACKEND`) for the batched ANYmal ids, ``sb3`` for every other id.
-
-    Raises:
-        ValueError: the id is not registered.
-    """
-    return DEFAULT_BACKEND if is_batched_anymal(env_id) else GENERIC_BACKEND
-
-
 def make_spec(
     env_id: str = DEFAULT_ENV,
     backend: str = DEFAULT_BACKEND,
@@ -266,38 +214,28 @@ def make_spec(
     ppo_overrides: dict[str, Any] | None = None,
     **run: Any,
 ) -> TrainSpec:
-    """A :class:`TrainSpec` from an id, environment overrides, PPO field overrides and run settings.
-
-    ``env_overrides``: EnvConfig fields for the batched ANYmal ids, the environment's constructor keywords
-    (``margin_weight`` among them where it takes one) for every other id.
+    """A :class:`TrainSpec` from a batched ANYmal id, EnvConfig field overrides, PPO field overrides and run
+    settings.
 
     Raises:
-        ValueError: unknown id, or a generic id with the rsl backend.
+        ValueError: not a batched ANYmal id (:func:`~margin_rl.train.environments.anymal_id`).
         TypeError: unknown option names or badly typed values.
     """
-    if not is_batched_anymal(env_id) and backend != GENERIC_BACKEND:  # the backend is the first thing to fix
-        raise _generic_backend_error(env_id, backend)
-    target = env_target(env_id, env_overrides)
-    env = {"env_config": target.config} if target.is_anymal else {"env_kwargs": target.kwargs}
+    config = env_target(env_id, env_overrides).config
     ppo = apply_overrides(default_ppo_config(backend), dict(ppo_overrides or {}))
-    return TrainSpec(env_id=env_id, backend=backend, ppo=ppo, **env, **run)
+    return TrainSpec(env_id=env_id, backend=backend, ppo=ppo, env_config=config, **run)
 
 
 def check_environment(spec: TrainSpec) -> None:
-    """Fail before a run directory is made when the spec's environment cannot be built as asked.
-
-    ANYmal: the learned margin's weights must load (:func:`~margin_rl.train.environments.check_margin_available`).
-    Generic: the id must not be a batched ANYmal one, and one environment must build with ``env_kwargs`` and
-    have spaces the generic path trains (:func:`~margin_rl.train.environments.check_gym_env`).
+    """Fail before a run directory is made when the spec's environment cannot be built as asked: the id must be a
+    batched ANYmal one (:func:`~margin_rl.train.environments.anymal_id`) and the learned margin's weights must load
+    (:func:`~margin_rl.train.environments.check_margin_available`).
 
     Raises:
         ValueError: with a hint on what to change.
     """
-    anymal_id = is_batched_anymal(spec.env_id)
-    if spec.is_anymal != anymal_id:
-        needed = "env_config" if anymal_id else "env_kwargs"
-        raise ValueError(f"{spec.env_id} needs a spec with {needed}; build the spec with make_spec")
-    spec.target.check()
+    anymal_id(spec.env_id, "train")
+    check_margin_available(spec.env_config)
 
 
 INIT_FROM_SUFFIX = {"rsl": ".pt", "sb3": ".zip"}
@@ -487,13 +425,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--backend",
         choices=BACKENDS,
         default=None,
-        help=f"PPO library (default {DEFAULT_BACKEND} for ANYmal ids, {GENERIC_BACKEND}, the only one, for other ids)",
+        help=f"PPO library (default {DEFAULT_BACKEND})",
     )
     parser.add_argument(
         "--margin-weight",
         type=float,
-        help=f"weight of the margin reward term (0: baseline; default {cli.CLI_MARGIN_WEIGHT:g} for ANYmal ids); other "
-        "ids: their margin_weight keyword (default: the environment's)",
+        help=f"weight of the margin reward term (0: baseline; default {cli.CLI_MARGIN_WEIGHT:g})",
     )
     parser.add_argument("--seed", type=int, default=None, help=f"random seed (default {DEFAULT_SEED})")
     parser.add_argument("--num-envs", type=int, default=None, help=f"parallel environments ({DEFAULT_NUM_ENVS})")
@@ -538,7 +475,7 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
             check_init_from(spec.init_from, spec.backend)
         return spec, args.resume, True
     env_id = args.env or DEFAULT_ENV
-    backend = args.backend or default_backend(env_id)
+    backend = args.backend or DEFAULT_BACKEND
     run = {
         "seed": DEFAULT_SEED if args.seed is None else args.seed,
         "num_envs": args.num_envs or DEFAULT_NUM_ENVS,

@@ -21,6 +21,7 @@ import numpy as np
 
 from margin_rl.envs.core import AnymalCore, StepOutput
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
+from margin_rl.robot.mjcf_names import shank_body, thigh_body
 from margin_rl.stability.analytic.extended import extended_margin_batch
 from margin_rl.stability.analytic.margin import STATUSES
 from margin_rl.stability.learned.model import LearnedMargin
@@ -107,11 +108,8 @@ class Episodes:
 # ---------------------------------------------------------------------------------------------------------------------
 def live_state(core: AnymalCore) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The live ``qpos``, ``qvel`` and body ``xpos`` arrays (num_envs, ...) of the core's simulations."""
-    physics = getattr(core, "physics", None)  # the core's physics seam, where it has one
-    if physics is not None:
-        return physics.qpos, physics.qvel, physics.xpos
-    bind = core.batch.bind
-    return bind("qpos"), bind("qvel"), bind("xpos")
+    physics = core.physics  # the core's physics seam
+    return physics.qpos, physics.qvel, physics.xpos
 
 
 def thigh_geom_name(model: mujoco.MjModel, geom: int) -> str:
@@ -126,7 +124,7 @@ def thighs_on_terrain(core: AnymalCore, env: int) -> tuple[np.ndarray, set[str]]
     body, as the environment's thigh-contact sensors), and the names (:func:`thigh_geom_name`) of the touching
     thigh geoms, each once (MuJoCo may report several contact points for one geom)."""
     model, data = core.model, core.render_data(env)
-    thigh_leg = {model.body(f"{leg}_THIGH").id: i for i, leg in enumerate(core.robot.leg_names)}
+    thigh_leg = {model.body(thigh_body(leg)).id: i for i, leg in enumerate(core.robot.leg_names)}
     legs, names = np.zeros(len(LEGS), dtype=bool), set()
     for contact in data.contact[: data.ncon]:
         pair = (int(contact.geom1), int(contact.geom2))
@@ -173,7 +171,7 @@ def roll_out(bundle: Bundle, run: BundledRun, envs: int, seed: int, velocity: fl
     core.reset()
     obs = core.observe_all()
     # Thigh contact ends most falls; the knees' height says how close the thighs' lower ends are to the floor.
-    knees = np.array([core.model.body(f"{leg}_SHANK").id for leg in core.robot.leg_names])
+    knees = np.array([core.model.body(shank_body(leg)).id for leg in core.robot.leg_names])
     statistics = EpisodeStatistics(envs, core.dt, warmup_steps=round(WARMUP_S / core.dt))
     recorder = Recorder()
     first: dict[int, dict[str, float]] = {}  # each environment's first episode (metrics, ending)

@@ -32,6 +32,11 @@ def toy_weights(tmp_path_factory: pytest.TempPathFactory) -> str:
     return str(path.with_suffix(".npz"))
 
 
+def native_vec(env_id: str, num_envs: int, **options: object) -> gym.vector.VectorEnv:
+    """The native batched vector env of ``env_id`` (its ``vector_entry_point``)."""
+    return gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **options)
+
+
 @pytest.mark.parametrize("env_id", sorted(ANYMAL_ENV_IDS))
 def test_check_env_on_every_id(env_id: str, toy_weights: str) -> None:
     env = gym.make(env_id, margin_weights=toy_weights)
@@ -104,13 +109,7 @@ def test_same_seed_same_rollout(toy_weights: str) -> None:
 
 def test_batched_env_equals_single_envs_step_for_step(toy_weights: str) -> None:
     n = 3
-    vec = gym.make_vec(
-        "margin_rl/AnymalB-v1",
-        num_envs=n,
-        vectorization_mode="vector_entry_point",
-        margin_weights=toy_weights,
-        randomization=NO_NOISE,
-    )
+    vec = native_vec("margin_rl/AnymalB-v1", n, margin_weights=toy_weights, randomization=NO_NOISE)
     singles = [gym.make("margin_rl/AnymalB-v1", margin_weights=toy_weights, randomization=NO_NOISE) for _ in range(n)]
     obs_v, _ = vec.reset(seed=0)
     obs_s = [env.reset(seed=0)[0] for env in singles]
@@ -203,12 +202,8 @@ def test_diverging_simulation_terminates_with_a_flag(toy_weights: str) -> None:
 
 
 def test_vector_env_same_step_autoreset(toy_weights: str) -> None:
-    vec = gym.make_vec(
-        "margin_rl/AnymalB-v1",
-        num_envs=4,
-        vectorization_mode="vector_entry_point",
-        margin_weights=toy_weights,
-        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+    vec = native_vec(
+        "margin_rl/AnymalB-v1", 4, margin_weights=toy_weights, autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
     )
     assert vec.metadata["autoreset_mode"] == gym.vector.AutoresetMode.SAME_STEP
     vec.unwrapped.core.max_episode_steps = 3
@@ -224,13 +219,7 @@ def test_vector_env_same_step_autoreset(toy_weights: str) -> None:
 
 
 def test_privileged_observation_and_structure(toy_weights: str) -> None:
-    vec = gym.make_vec(
-        "margin_rl/AnymalC-Rough-v1",
-        num_envs=2,
-        vectorization_mode="vector_entry_point",
-        margin_weights=toy_weights,
-        privileged_observations=True,
-    )
+    vec = native_vec("margin_rl/AnymalC-Rough-v1", 2, margin_weights=toy_weights, privileged_observations=True)
     vec.reset(seed=0)
     priv = vec.unwrapped.core.privileged_observation()
     assert priv.shape == (2, 38) and np.all(np.isfinite(priv))

@@ -21,7 +21,7 @@ import numpy as np
 
 from margin_rl.envs.core import AnymalCore, StepOutput
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
-from margin_rl.robot.mjcf_names import shank_body, thigh_body
+from margin_rl.robot.mjcf_names import shank_body
 from margin_rl.stability.analytic.extended import extended_margin_batch
 from margin_rl.stability.analytic.margin import STATUSES
 from margin_rl.stability.learned.model import LearnedMargin
@@ -124,7 +124,9 @@ def thighs_on_terrain(core: AnymalCore, env: int) -> tuple[np.ndarray, set[str]]
     body, as the environment's thigh-contact sensors), and the names (:func:`thigh_geom_name`) of the touching
     thigh geoms, each once (MuJoCo may report several contact points for one geom)."""
     model, data = core.model, core.render_data(env)
-    thigh_leg = {model.body(thigh_body(leg)).id: i for i, leg in enumerate(core.robot.leg_names)}
+    # The thigh is the shank's parent body in the kinematic tree.
+    shanks = [model.body(shank_body(leg)).id for leg in core.robot.leg_names]
+    thigh_leg = {int(model.body_parentid[shank]): i for i, shank in enumerate(shanks)}
     legs, names = np.zeros(len(LEGS), dtype=bool), set()
     for contact in data.contact[: data.ncon]:
         pair = (int(contact.geom1), int(contact.geom2))

@@ -33,7 +33,6 @@ __all__ = [
     "STANDING_KEYFRAME",
     "foot_contact_sensor",
     "shank_body",
-    "thigh_body",
     "thigh_contact_sensor",
 ]
 
@@ -77,12 +76,6 @@ JOINT_QVEL = slice(6, None)
 def _check_leg(leg: str) -> None:
     if leg not in LEGS:
         raise ValueError(f"unknown leg {leg!r}; the legs are {', '.join(LEGS)}")
-
-
-def thigh_body(leg: str) -> str:
-    """The thigh body of ``leg`` (``LF``, ``RF``, ``LH``, ``RH``); a thigh touching the terrain ends an episode."""
-    _check_leg(leg)
-    return f"{leg}_THIGH"
 
 
 def shank_body(leg: str) -> str:

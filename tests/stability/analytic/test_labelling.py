@@ -58,16 +58,23 @@ def test_batched_labels_do_not_depend_on_how_the_states_are_cut() -> None:
     np.testing.assert_array_equal(pieces.n_lps, whole.n_lps)
 
 
-def test_one_state_is_a_batch_of_one() -> None:
-    """A state's problem does not depend on its batch: ``problem[i]`` of a batch equals the batch of one."""
-    robot = load_robot("anymal_b")
-    lams = sample_states(robot, 30, seed=8)
+@pytest.mark.parametrize("robot_name", ["anymal_b", "anymal_c"])
+def test_one_state_is_a_batch_of_one(robot_name: str) -> None:
+    """A state's problem does not depend on its batch: ``problem[i]`` of a batch equals the batch of one, to
+    rounding (each state stops its CoM fixed point on its own; BLAS rounds the small matrix products of 1 and of
+    N rows differently in the last bit on a few states in a thousand)."""
+    robot = load_robot(robot_name)
+    lams = sample_states(robot, 40, seed=8)
     whole = contact_problem(robot, lams)
-    assert len(whole) == 30 and whole.solvable.sum() >= 25
+    assert len(whole) == 40 and whole.solvable.sum() >= 30
     for i in range(len(lams)):
         alone, part = contact_problem(robot, lams[i : i + 1])[0], whole[i]
         for f in fields(ContactProblem):
-            np.testing.assert_array_equal(getattr(alone, f.name), getattr(part, f.name), err_msg=f.name)
+            mine, theirs = getattr(alone, f.name), getattr(part, f.name)
+            if isinstance(mine, np.ndarray) and mine.dtype.kind == "f":
+                np.testing.assert_allclose(mine, theirs, rtol=1e-12, atol=1e-12, err_msg=f.name)
+            else:
+                np.testing.assert_array_equal(mine, theirs, err_msg=f.name)
 
 
 def test_contact_problem_matches_the_robots_own_com_relative_ik() -> None:

@@ -14,7 +14,7 @@ The same folded weights give
 
 * numpy: ``net(x)`` ((in,) -> (out,), (N, in) -> (N, out), float64), ``net.value_float32(x)`` (batches in
   float32, about twice as fast), ``net.value_and_grad(x)`` and ``net.jacobian(x)`` (exact backpropagation;
-  relu'(0) = 0, as in torch and CasADi's ``fmax``);
+  relu'(0) = 0, as in torch and CasADi's ``fmax``), ``net.hessian(x)`` (exact, one-output networks);
 * torch: ``net.torch_module(dtype)``, an ``nn.Sequential`` of ``Linear`` and activation modules;
 * CasADi: ``net.casadi(x)``, an expression of a symbolic (in, n) matrix, one column per input.
 
@@ -211,6 +211,42 @@ class DenseNetwork:
     def jacobian(self, x: ArrayLike) -> FloatArray:
         """d output / d input: (out, in) at one input, (N, out, in) for a batch."""
         return self.value_and_grad(x)[1]
+
+    def hessian(self, x: ArrayLike) -> FloatArray:
+        """d^2 output / d input^2 of a one-output network, exact: (in,) -> (in, in), (N, in) -> (N, in, in).
+
+        With z_l = W_l h_(l-1) + b_l, h_l = act(z_l), A_l = dz_l/dx (A_1 = W_1, A_(l+1) = W_(l+1) diag(act'(z_l))
+        A_l) and a_l = dy/dh_l (the backpropagated adjoint), the affine layers add no curvature, so
+        H = sum_l A_l^T diag(act''(z_l) a_l) A_l. softsign''(z) = -2 sign(z) / (1 + |z|)^3; relu'' = 0 (almost
+        everywhere: a relu network's Hessian is zero).
+
+        Raises:
+            ValueError: a network with more than one output, or an input of the wrong shape.
+        """
+        if self.out_dim != 1:
+            raise ValueError(f"hessian() takes a network with one output, this one has {self.out_dim}")
+        x = self._check(x)
+        single = x.ndim == 1
+        h = x[None] if single else x
+        first, second = [], []
+        for W, b in zip(self.weights[:-1], self.biases[:-1], strict=True):
+            z = h @ W.T + b
+            h, d1 = self._activate_with_derivative(z)
+            first.append(d1)
+            second.append(-2.0 * np.sign(z) * d1 * np.sqrt(d1) if self.activation == "softsign" else np.zeros_like(z))
+        adjoints = []
+        adjoint = np.broadcast_to(self.weights[-1][0], (h.shape[0], self.weights[-1].shape[1]))
+        for W, d1 in zip(reversed(self.weights[:-1]), reversed(first), strict=True):
+            adjoints.append(adjoint)
+            adjoint = (adjoint * d1) @ W
+        adjoints.reverse()
+        A = np.broadcast_to(self.weights[0], (h.shape[0], *self.weights[0].shape))
+        hessian = np.zeros((h.shape[0], self.in_dim, self.in_dim))
+        for layer, (d2, a) in enumerate(zip(second, adjoints, strict=True)):
+            if layer:
+                A = np.matmul(self.weights[layer], first[layer - 1][:, :, None] * A)
+            hessian += np.matmul(np.swapaxes(A, 1, 2), (d2 * a)[:, :, None] * A)
+        return hessian[0] if single else hessian
 
     # ------------------------------------------------------------------ torch
     def torch_module(self, dtype: Any = None) -> Any:

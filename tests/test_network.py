@@ -200,3 +200,32 @@ def test_weights_file_helpers(tmp_path: Path) -> None:
         read_arrays(tmp_path / "objects.npz")
     write_card(tmp_path / "card.json", {"b": 1, "a": [1, 2]})
     assert (tmp_path / "card.json").read_text() == '{\n  "b": 1,\n  "a": [\n    1,\n    2\n  ]\n}\n'
+
+
+@pytest.mark.parametrize("activation", ACTIVATIONS)
+def test_hessian_matches_finite_differences_of_the_gradient(activation: str) -> None:
+    """Second-order backpropagation against central differences of the exact gradient; symmetric; a batch equals
+    its rows; relu networks have no curvature (almost everywhere)."""
+    p = trained(activation, widths=(5, 16, 12, 1))
+    net = fold(p)
+    x = inputs(6)
+    hessians = net.hessian(x)
+    assert hessians.shape == (6, 5, 5)
+    np.testing.assert_allclose(hessians, np.swapaxes(hessians, 1, 2), rtol=0, atol=1e-12)
+    step = 1e-6
+    for i, row in enumerate(x):
+        numeric = np.stack(
+            [(net.jacobian(row + step * e)[0] - net.jacobian(row - step * e)[0]) / (2 * step) for e in np.eye(5)],
+            axis=1,
+        )
+        np.testing.assert_allclose(hessians[i], numeric, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(net.hessian(row), hessians[i], rtol=0, atol=1e-12)
+    if activation == "relu":
+        assert np.all(hessians == 0.0)
+    else:
+        assert np.abs(hessians).max() > 1e-3
+
+
+def test_hessian_needs_one_output() -> None:
+    with pytest.raises(ValueError, match="one output"):
+        fold(trained("softsign")).hessian(inputs(2))

@@ -14,10 +14,21 @@ the batch is block diagonal and *one* reverse sweep with a seed of ones returns 
 gradient (the gradient of the sum). CasADi's generic Jacobian of the planner's constraints does not
 see this through the shared foothold variables and spent ~40 directional sweeps of the network per
 evaluation (46 ms of a 60 ms IPOPT iteration, measured); the block-diagonal Jacobian is supplied here.
+
+For IPOPT's exact Hessian (``PlannerConfig(hessian="exact")``) the custom Jacobian has a custom Jacobian of
+its own: the block-diagonal second derivatives, one 47 x 47 Hessian per column, computed in numpy by
+:meth:`margin_rl.network.DenseNetwork.hessian` (exact second-order backpropagation, ~5 ms for 16 columns)
+through a CasADi callback. CasADi's generic second derivatives of the network cost ~250 ms per IPOPT
+iteration (measured); the callback is only called when second derivatives are asked for.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
+import numpy as np
+
+from margin_rl.network import DenseNetwork
 from margin_rl.stability import LAMBDA_DIM, LearnedMargin
 
 
@@ -50,9 +61,55 @@ def margin_function(model: LearnedMargin, n_columns: int = 1):  # -> casadi.Func
     # Block-diagonal Jacobian (n, 47 n) of vec(margin) w.r.t. vec(lam), from one reverse sweep.
     lam_j, out_j = ca.MX.sym("lam", LAMBDA_DIM, int(n_columns)), ca.MX.sym("margin", 1, int(n_columns))
     grads = ca.gradient(ca.sum2(plain(lam_j)), lam_j)  # (47, n): column k is dm_k / dlam_k
+    blocks = ca.diagcat(*[grads[:, k].T for k in range(int(n_columns))])
+    second = _block_hessian_callback(model.network, int(n_columns), blocks.sparsity())
     jacobian = ca.Function(
-        "jac_learned_margin", [lam_j, out_j], [ca.diagcat(*[grads[:, k].T for k in range(int(n_columns))])]
+        "jac_learned_margin", [lam_j, out_j], [blocks], {"custom_jacobian": second, "jac_penalty": 0}
     )
-    return ca.Function(
+    function = ca.Function(
         "learned_margin", [lam], [plain(lam)], ["lam"], ["margin"], {"custom_jacobian": jacobian, "jac_penalty": 0}
     )
+    # CasADi keeps a Python callback only while its Python object lives: it goes with the returned Function,
+    # whose holder (the planner's problem) must keep that Function for as long as its solver.
+    function.keepalive = second
+    return function
+
+
+def _block_hessian_callback(network: DenseNetwork, n_columns: int, jacobian_sparsity: Any) -> Any:
+    """The Jacobian of the margin's block-diagonal Jacobian (n, 47 n): CasADi's ``jac_jac_learned_margin``.
+
+    CasADi's layout: the Jacobian of the (n, 47 n) Jacobian, vectorised column-major, w.r.t. lambda (47, n)
+    vectorised column-major, and w.r.t. the margin (zero). Its non-zeros: for column k, d J[k, 47 k + i] /
+    d lam[j, k] = H_k[i, j], the network's Hessian at column k; everything else is zero.
+    """
+    import casadi as ca
+
+    d = LAMBDA_DIM
+    rows = [(d * k + i) * n_columns + k for k in range(n_columns) for j in range(d) for i in range(d)]
+    cols = [d * k + j for k in range(n_columns) for j in range(d) for _ in range(d)]
+    blocks = ca.Sparsity.triplet(n_columns * d * n_columns, d * n_columns, rows, cols)
+
+    class BlockHessian(ca.Callback):
+        def __init__(self) -> None:
+            ca.Callback.__init__(self)
+            self.construct("jac_jac_learned_margin", {})
+
+        def get_n_in(self) -> int:
+            return 3  # lambda, the margin (nominal output), the Jacobian (nominal output)
+
+        def get_n_out(self) -> int:
+            return 2
+
+        def get_sparsity_in(self, i: int) -> Any:
+            return [ca.Sparsity.dense(d, n_columns), ca.Sparsity.dense(1, n_columns), jacobian_sparsity][i]
+
+        def get_sparsity_out(self, i: int) -> Any:
+            return [blocks, ca.Sparsity(n_columns * d * n_columns, n_columns)][i]
+
+        def eval(self, arg: list[Any]) -> list[Any]:
+            hessians = network.hessian(np.asarray(arg[0]).T)  # (n, 47, 47)
+            # CCS order: column (k, j), then rows i ascending: H_k[i, j] with i fastest
+            nonzeros = np.swapaxes(hessians, 1, 2).reshape(-1)
+            return [ca.DM(blocks, nonzeros), ca.DM(ca.Sparsity(n_columns * d * n_columns, n_columns))]
+
+    return BlockHessian()

@@ -58,6 +58,9 @@ BASE_DIM = 12
 """Per base node: CoM position (3), roll-pitch-yaw (3), CoM velocity (3), Euler rates (3)."""
 
 MARGIN_KINDS: tuple[str, ...] = ("learned", "analytic_fd", "none")
+HESSIANS: dict[str, str] = {"quasi-newton": "limited-memory", "exact": "exact"}
+"""PlannerConfig.hessian -> IPOPT's hessian_approximation (exact: every term's second derivatives, the network's
+from numpy)."""
 
 _SUCCESS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 
@@ -108,6 +111,9 @@ class PlannerConfig:
     weight_acc: float = 0.02  # w_a [s^3/m^2]
     weight_centroid: float = 0.0  # w_c, contrast only
     max_iter: int = 150
+    # IPOPT's Hessian of the Lagrangian: "quasi-newton" (L-BFGS, ~80-90 iterations per horizon) or "exact" (the
+    # network's block-diagonal second derivatives in numpy, margin_rl.planning.mlp: ~8-9 iterations)
+    hessian: str = "quasi-newton"
     tol: float = 1e-3  # IPOPT tol (scaled optimality error); constraints are met to constr_viol_tol 1e-4
     fd_step: float = 2e-3  # finite-difference step of the analytic_fd margin (lambda units)
     # Half-widths of the box around the target state (BaseState.as_vector order). Lateral position, height,
@@ -120,6 +126,8 @@ class PlannerConfig:
     def __post_init__(self) -> None:
         if self.margin not in MARGIN_KINDS:
             raise ValueError(f"margin must be one of {', '.join(MARGIN_KINDS)}, got {self.margin!r}")
+        if self.hessian not in HESSIANS:
+            raise ValueError(f"PlannerConfig.hessian must be one of {', '.join(HESSIANS)}, got {self.hessian!r}")
         positive = ("horizon", "node_dt", "mu", "max_com_acc_xy", "max_com_acc_z", "max_euler_acc", "max_tilt")
         for name in (*positive, "max_com_vel_xy", "tol", "fd_step"):
             value = getattr(self, name)
@@ -326,7 +334,9 @@ class TrajectoryProblem:
             if config.margin == "learned":
                 from margin_rl.planning.mlp import margin_function
 
-                margins = margin_function(margin_model, n_nodes)(LAM)
+                # Kept with the problem: the function's second-derivative callback lives as long as it does.
+                self._margin_function = margin_function(margin_model, n_nodes)
+                margins = self._margin_function(LAM)
             else:
                 from margin_rl.planning.analytic_fd import analytic_margin_function
 
@@ -387,7 +397,7 @@ class TrajectoryProblem:
             "ipopt.max_iter": int(config.max_iter),
             "ipopt.tol": config.tol,
             "ipopt.acceptable_tol": 10 * config.tol,
-            "ipopt.hessian_approximation": "limited-memory",
+            "ipopt.hessian_approximation": HESSIANS[config.hessian],
             "ipopt.mu_strategy": "adaptive",
         }
         opts.update({f"ipopt.{key}": value for key, value in config.ipopt_options})

@@ -56,7 +56,7 @@ from margin_rl.envs.stability_input import (
     stance_width,
 )
 from margin_rl.envs.step_data import Accelerations, SimulationState, StepOutput, check_finite_outputs
-from margin_rl.envs.terminations import any_cause, termination_causes
+from margin_rl.envs.terminations import any_cause, info_key, termination_causes
 from margin_rl.envs.terrain import Terrain, flat_terrain, rough_terrain
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
 from margin_rl.robot import mjcf_names as names
@@ -189,20 +189,6 @@ class AnymalCore:
                 "make a new environment with the new value instead"
             )
         self.config = config
-
-    # MuJoCo-batch internals that analysis scripts read directly (the seam is self.physics).
-    @property
-    def batch(self) -> Any:
-        """The ``mujoco.batch.Batch`` behind :attr:`physics`."""
-        return self.physics.batch
-
-    @property
-    def _ctrl(self) -> np.ndarray:
-        return self.physics.ctrl
-
-    @property
-    def _xfrc(self) -> np.ndarray:
-        return self.physics.xfrc_applied
 
     # ------------------------------------------------------------------ reset
     def reset(self, ids: np.ndarray | None = None, seed: int | None = None) -> None:
@@ -450,7 +436,7 @@ class AnymalCore:
             "lambda": self._last_lambda,  # (N, 47), the margin's input (names: stability.lambda_names())
             "fell": (terminated & ~diverged).astype(np.float64),
             "diverged": diverged.astype(np.float64),
-            **{f"termination_{name}": flags.astype(np.float64) for name, flags in causes.items()},
+            **{info_key(name): flags.astype(np.float64) for name, flags in causes.items()},
         }
 
     def push(self, ids: np.ndarray, force: np.ndarray, duration_s: float, frame: str = "world") -> None:

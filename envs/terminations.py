@@ -40,7 +40,12 @@ class TerminationCause:
     @property
     def info_key(self) -> str:
         """Its key in the step info: ``termination_<name>``."""
-        return f"termination_{self.name}"
+        return info_key(self.name)
+
+
+def info_key(cause: str) -> str:
+    """The step-info key of termination cause ``cause``: ``termination_<cause>``."""
+    return f"termination_{cause}"
 
 
 TERMINATION_CAUSES: tuple[TerminationCause, ...] = (

@@ -71,6 +71,9 @@ from margin_rl.envs.observations import observation_size, observation_structure
 AUTORESET_MODES: tuple[AutoresetMode, ...] = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
 """The autoreset modes :class:`AnymalVectorEnv` offers; the first is the default (see the module docstring)."""
 
+CONFIG_FIELDS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(EnvConfig))
+"""EnvConfig's fields: attributes shared by every environment of the batch."""
+
 PER_ENV_ATTRIBUTES: dict[str, Callable[[AnymalCore], np.ndarray]] = {
     "command": lambda core: core.command,
     "episode_step": lambda core: core.episode_step,
@@ -144,7 +147,7 @@ class AnymalVectorEnv(VectorEnv):
     ) -> None:
         check_int("num_envs", num_envs, minimum=1, hint="environments in the batch")
         self.autoreset_mode = check_autoreset_mode(autoreset_mode)
-        self.config = make_config(config, robot, terrain, overrides)
+        config = make_config(config, robot, terrain, overrides)
         if max_episode_steps is not None:
             check_int("max_episode_steps", max_episode_steps, minimum=1, hint="policy steps per episode, or None")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -155,7 +158,7 @@ class AnymalVectorEnv(VectorEnv):
         check_frame_size(width, height)
         seed = check_seed(seed, "seed")
         same_step = self.autoreset_mode == AutoresetMode.SAME_STEP
-        self.core = AnymalCore(self.config, num_envs=num_envs, seed=seed, autoreset=same_step)
+        self.core = AnymalCore(config, num_envs=num_envs, seed=seed, autoreset=same_step)
         if max_episode_steps is not None:
             self.core.max_episode_steps = int(max_episode_steps)
         self.num_envs = num_envs
@@ -169,6 +172,11 @@ class AnymalVectorEnv(VectorEnv):
         self._frames = FrameRenderer(self.core, width, height)
         self._needs_reset = True
         self._autoreset_envs = np.zeros(num_envs, dtype=bool)  # NEXT_STEP: reset these at the next step
+
+    @property
+    def config(self) -> EnvConfig:
+        """The batch's EnvConfig (its core's: :meth:`set_attr` changes it there)."""
+        return self.core.config
 
     @property
     def dt(self) -> float:
@@ -252,7 +260,7 @@ class AnymalVectorEnv(VectorEnv):
         if name in PER_ENV_ATTRIBUTES:
             values = PER_ENV_ATTRIBUTES[name](self.core)
             return tuple(values[i].item() if values.ndim == 1 else values[i].copy() for i in range(self.num_envs))
-        if name in {f.name for f in dataclasses.fields(EnvConfig)}:
+        if name in CONFIG_FIELDS:
             return (getattr(self.config, name),) * self.num_envs
         if name in ("observation_space", "action_space"):
             return (getattr(self, f"single_{name}"),) * self.num_envs
@@ -286,16 +294,14 @@ class AnymalVectorEnv(VectorEnv):
         if name == "command":
             self.core.command[:] = _commands(values)
             return
-        if name in {f.name for f in dataclasses.fields(EnvConfig)}:
+        if name in CONFIG_FIELDS:
             first = values[0]
             if any(not _same(v, first) for v in values[1:]):
                 raise ValueError(
                     f"{name}: the environments of the batch share one EnvConfig, so set_attr({name!r}, ...) takes "
                     f"one value (or the same for every environment), got {list(values)!r}"
                 )
-            config = self.config.replace(**{name: first})
-            self.core.reconfigure(config)
-            self.config = config
+            self.core.reconfigure(self.config.replace(**{name: first}))
             return
         raise AttributeError(
             f"{type(self).__name__}: {name!r} cannot be set; settable: command (per environment) and the EnvConfig "
@@ -328,7 +334,7 @@ class AnymalVectorEnv(VectorEnv):
         return values
 
     def _attribute_help(self) -> str:
-        fields = ", ".join(f.name for f in dataclasses.fields(EnvConfig))
+        fields = ", ".join(CONFIG_FIELDS)
         return (
             f"per-environment attributes: {', '.join(PER_ENV_ATTRIBUTES)}; EnvConfig fields: {fields}; and the "
             "environment's own (render_mode, dt, config, spec, metadata, observation_space, action_space, ...)"

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from margin_rl.envs.terminations import CAUSE_NAMES
+from margin_rl.envs.terminations import CAUSE_NAMES, info_key
 
 AXES: tuple[str, ...] = ("x", "y", "z")
 TERMINATION_KEYS: tuple[str, ...] = ("fell", "diverged", "timed_out")
@@ -183,8 +183,8 @@ class EpisodeStatistics:
         metrics["fell"] = np.asarray(info["fell"], dtype=float)[ids]
         metrics["diverged"] = np.asarray(info["diverged"], dtype=float)[ids]
         for cause in CAUSE_NAMES:
-            if f"termination_{cause}" in info:
-                metrics[f"termination/{cause}"] = np.asarray(info[f"termination_{cause}"], dtype=float)[ids]
+            if info_key(cause) in info:
+                metrics[f"termination/{cause}"] = np.asarray(info[info_key(cause)], dtype=float)[ids]
         metrics["timed_out"] = truncated[ids].astype(float)
         return metrics
 

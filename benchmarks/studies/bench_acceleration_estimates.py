@@ -33,6 +33,7 @@ import margin_rl
 from margin_rl.envs.anymal import AnymalEnv
 from margin_rl.envs.core import MARGIN_CLIP
 from margin_rl.envs.stability_input import stability_state_from_simulation
+from margin_rl.robot.mjcf_names import BASE_BODY
 from margin_rl.stability import LearnedMargin, TableI, analytic_margin
 from margin_rl.train.artifacts.bundle import load_bundle
 from margin_rl.train.artifacts.policies import load_policy
@@ -46,13 +47,14 @@ def instantaneous_accelerations(env: AnymalEnv) -> tuple[np.ndarray, np.ndarray]
     """World-frame CoM acceleration [m/s^2] and base angular acceleration [rad/s^2] at the current state."""
     core = env.core
     data = core.render_data(0)  # qpos, qvel of the env
-    data.ctrl[:], data.xfrc_applied[:] = core._ctrl[0], core._xfrc[0]  # the servo targets and push it steps with
+    # the servo targets and push it steps with
+    data.ctrl[:], data.xfrc_applied[:] = core.physics.ctrl[0], core.physics.xfrc_applied[0]
     mujoco.mj_forward(core.model, data)
     mujoco.mj_rnePostConstraint(core.model, data)
     mass = float(np.sum(core.model.body_mass))
     external = data.cfrc_ext[:, 3:].sum(axis=0) + data.xfrc_applied[:, :3].sum(axis=0)
     com_acc = GRAVITY + external / mass
-    rot = data.xmat[core.model.body("base").id].reshape(3, 3)
+    rot = data.xmat[core.model.body(BASE_BODY).id].reshape(3, 3)
     return com_acc, rot @ data.qacc[3:6]
 
 

@@ -20,6 +20,7 @@ import mujoco
 import numpy as np
 
 from margin_rl.envs.core import AnymalCore, StepOutput
+from margin_rl.envs.terminations import CAUSE_NAMES, info_key
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
 from margin_rl.robot.mjcf_names import shank_body
 from margin_rl.stability.analytic.extended import extended_margin_batch
@@ -32,7 +33,7 @@ from margin_rl.train.commands.evaluate import evaluation_config, resolve_env
 from margin_rl.train.metrics import EpisodeStatistics, split_episodes, summarize
 from margin_rl.train.runs import torch_threads
 
-CAUSES: tuple[str, ...] = ("base_contact", "thigh_contact", "base_height", "tilt", "diverged")
+CAUSES: tuple[str, ...] = CAUSE_NAMES
 """The environment's termination causes, each reported per step as ``info["termination_<cause>"]``."""
 
 LEGS: tuple[str, ...] = ("LF", "RF", "LH", "RH")
@@ -191,7 +192,7 @@ def roll_out(bundle: Bundle, run: BundledRun, envs: int, seed: int, velocity: fl
                     continue
                 first[env] = episode
                 if out.terminated[env]:
-                    causes[env] = [out.info[f"termination_{cause}"][env] > 0.5 for cause in CAUSES]
+                    causes[env] = [out.info[info_key(cause)][env] > 0.5 for cause in CAUSES]
                     thighs[env], names = thighs_on_terrain(core, env)
                     thigh_geoms.update(names)
             obs = out.observation

@@ -1,7 +1,7 @@
 """The one environment interface of training and evaluation: the batched margin_rl ANYmal ids.
 
-Every id that ``margin_rl.train`` trains and evaluates is registered with the batched ``vector_entry_point``
-:data:`VECTOR_ENTRY_POINT` and runs on the one batched simulation, :class:`margin_rl.envs.core.AnymalCore`,
+Every id that ``margin_rl.train`` trains and evaluates is one of :data:`margin_rl.registration.ANYMAL_ENV_IDS`
+and runs on the one batched simulation, :class:`margin_rl.envs.core.AnymalCore`,
 configured by an :class:`~margin_rl.envs.config.EnvConfig`: :class:`AnymalTarget`, built by :func:`env_target`;
 :func:`margin_rl.train.commands.train.make_spec`, ``evaluate`` and the backends work on the target.
 
@@ -31,7 +31,6 @@ from margin_rl.train.config import apply_overrides
 
 DEFAULT_ENV = "margin_rl/AnymalB-v1"
 ACTION_SIZE = 12
-VECTOR_ENTRY_POINT = "margin_rl.envs.vector:AnymalVectorEnv"
 SB3_EXAMPLE = "examples/train_slip_hopper.py"
 """The repository's example of plain Stable-Baselines3 on another Gymnasium environment (the SLIP hopper)."""
 
@@ -61,7 +60,7 @@ def registered_spec(env_id: str, caller: str = "margin_rl.train") -> gymnasium.e
 
 def _anymal_spec(env_id: str, caller: str) -> gymnasium.envs.registration.EnvSpec:
     spec = registered_spec(env_id, caller)
-    if spec.vector_entry_point != VECTOR_ENTRY_POINT:
+    if spec.id not in ANYMAL_ENV_IDS:
         raise ValueError(f"{env_id!r} is not a margin_rl ANYmal environment: {_anymal_only(caller)}")
     return spec
 

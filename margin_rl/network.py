@@ -184,18 +184,19 @@ class DenseNetwork:
         derivatives = []
         hidden = zip(self.weights[:-1], self.biases[:-1], strict=True)
         W_last, b_last = self.weights[-1], self.biases[-1]
-        if h.ndim == 1:  # matrix-vector products: tens of microseconds
+        if h.ndim == 1:  # matrix-vector products: tens of microseconds, so no per-call overhead beyond them
             for W, b in hidden:
                 h, d = self._activate_with_derivative(W @ h + b)
                 derivatives.append(d)
-            rows = []
-            for w in W_last:
+            backward = list(zip(self.weights[-2::-1], derivatives[::-1], strict=True))
+            value, jacobian = np.empty(self.out_dim), np.empty((self.out_dim, self.in_dim))
+            for row, w in enumerate(W_last):
                 g = w
-                for W, d in zip(reversed(self.weights[:-1]), reversed(derivatives), strict=True):
+                for W, d in backward:
                     g = (g * d) @ W
-                rows.append(g)
-            value = np.array([w @ h + c for w, c in zip(W_last, b_last, strict=True)])
-            return value, np.stack(rows)
+                jacobian[row] = g
+                value[row] = w @ h + b_last[row]
+            return value, jacobian
         for W, b in hidden:
             h, d = self._activate_with_derivative(h @ W.T + b)
             derivatives.append(d)

@@ -11,6 +11,7 @@ backend (``MUJOCO_GL=egl`` headless).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -71,10 +72,17 @@ def joint_configuration(robot: Robot, result: CourseResult, t: float) -> tuple[n
     return np.concatenate([base, quat, q]), bool(solution.reachable.all())
 
 
-def write_mp4(
-    robot: Robot, result: CourseResult, path: str | Path, fps: int = 25, size: tuple[int, int] = (640, 360)
+def render_mp4(
+    model,  # mujoco.MjModel
+    frames: Iterable[np.ndarray],
+    path: str | Path,
+    fps: int = 25,
+    size: tuple[int, int] = (640, 360),
+    camera_distance: float = 2.6,
+    camera_azimuth: float = 120.0,
 ) -> Path:
-    """Render the course to ``path`` (MP4).
+    """Render ``frames`` (MuJoCo qpos vectors, one per video frame) of ``model`` to ``path`` (MP4), the camera
+    following the base.
 
     Raises:
         VideoUnavailableError: imageio/imageio-ffmpeg missing, or MuJoCo cannot render here.
@@ -88,23 +96,34 @@ def write_mp4(
         ) from exc
     import mujoco
 
-    model = scene_model(robot, result)
     data = mujoco.MjData(model)
     try:
         renderer = mujoco.Renderer(model, height=size[1], width=size[0])
     except Exception as exc:  # GL backend errors come as several types
         raise VideoUnavailableError(f"MuJoCo cannot render here ({exc}); set MUJOCO_GL=egl or osmesa") from exc
     camera = mujoco.MjvCamera()
-    camera.distance, camera.elevation, camera.azimuth = 2.6, -20.0, 120.0
+    camera.distance, camera.elevation, camera.azimuth = camera_distance, -20.0, camera_azimuth
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    times = np.arange(0.0, result.duration, 1.0 / fps)
     with imageio.get_writer(str(path), fps=fps, codec="libx264", quality=6, macro_block_size=8) as writer:
-        for t in times:
-            data.qpos[:], _ = joint_configuration(robot, result, float(t))
+        for qpos in frames:
+            data.qpos[:] = qpos
             mujoco.mj_kinematics(model, data)
             camera.lookat[:] = data.qpos[0:3]
             renderer.update_scene(data, camera)
             writer.append_data(renderer.render())
     renderer.close()
     return path
+
+
+def write_mp4(
+    robot: Robot, result: CourseResult, path: str | Path, fps: int = 25, size: tuple[int, int] = (640, 360)
+) -> Path:
+    """Render the course to ``path`` (MP4).
+
+    Raises:
+        VideoUnavailableError: imageio/imageio-ffmpeg missing, or MuJoCo cannot render here.
+    """
+    times = np.arange(0.0, result.duration, 1.0 / fps)
+    frames = (joint_configuration(robot, result, float(t))[0] for t in times)
+    return render_mp4(scene_model(robot, result), frames, path, fps, size)

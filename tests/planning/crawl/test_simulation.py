@@ -60,3 +60,17 @@ def test_s_reaches_zero_where_the_watched_foot_unloads(held):
     result = displacement_test(held())
     assert result.s_start > 0
     assert abs(result.unload_shift - result.s_zero_shift) < 0.01
+
+
+def test_a_crawl_replays_into_an_mp4(robot_c, gait, tmp_path):
+    from margin_rl.planning.crawl.video import write_crawl_mp4
+    from margin_rl.planning.video import VideoUnavailableError
+
+    sim = CrawlSimulation(robot_c, gait)
+    qpos = np.asarray(sim.trace.qpos)
+    pytest.importorskip("imageio_ffmpeg", reason="MP4 needs imageio-ffmpeg (the 'video' extra)")
+    try:
+        mp4 = write_crawl_mp4(robot_c, {"settle": qpos}, tmp_path / "crawl.mp4", 0.005, fps=5, size=(160, 96))
+    except VideoUnavailableError as exc:
+        pytest.skip(str(exc))
+    assert mp4.stat().st_size > 1000

@@ -7,6 +7,7 @@ import json
 import sys
 
 from margin_rl.planning.gait import GAITS
+from margin_rl.planning.problem import HESSIANS, PlannerConfig
 from margin_rl.planning.scenarios import SCENARIOS
 
 
@@ -22,6 +23,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-video", action="store_true", help="skip the MP4")
     parser.add_argument("--no-contrast", action="store_true", help="skip the plans without the margin constraint")
     parser.add_argument("--max-plans", type=int, default=None, help="stop after this many replans (a short run)")
+    parser.add_argument(
+        "--hessian", choices=HESSIANS, default=PlannerConfig().hessian,
+        help="IPOPT's Hessian of the Lagrangian: exact (the network's second derivatives) or quasi-newton (L-BFGS)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     names = list(SCENARIOS) if args.scenario == "all" else [args.scenario]
     unknown = [n for n in names if n not in SCENARIOS]
@@ -38,6 +43,7 @@ def main(argv: list[str] | None = None) -> int:
             video=not args.no_video,
             contrast=not args.no_contrast,
             max_plans=args.max_plans,
+            config=PlannerConfig(hessian=args.hessian),
         )
         json.dump(summary, sys.stdout, indent=2, default=float)
         print()

@@ -7,7 +7,8 @@
   the planners' CoM positions;
 * ``along_crawl.png``: the CWC margin and the FWP factor along the heuristic crawl's triple stances with
   and without the load (Fig. 6);
-* ``loaded_crawl.png``: the largest joint torque relative to its limit along the loaded crawls.
+* ``loaded_crawl.png``: the largest joint torque relative to its limit along the loaded, heavy and hindered
+  crawls.
 """
 
 from __future__ import annotations
@@ -97,14 +98,23 @@ def along_crawl_figure(summary: dict, series: dict, path: Path) -> Path:
 def loaded_crawl_figure(summary: dict, series: dict, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(10, 3.8))
-    for name in PLANNER_NAMES:
-        ax.plot(series[f"{name}_loaded_time"], series[f"{name}_loaded_torque_ratio"], color=PLANNER_COLOURS[name],
-                lw=0.8, label=name)  # fmt: skip
-    ax.axhline(1.0, color="k", lw=0.8)
-    ax.set(xlabel="time [s]", ylabel="max |tau| / limit",
-           title=f"{summary['robot']}: crawl with {summary['settings']['load_kg']:g} kg on the base")  # fmt: skip
-    ax.legend()
+    settings = summary["settings"]
+    titles = {
+        "loaded": f"{settings['load_kg']:g} kg on the base",
+        "heavy": f"{summary['heavy_load_kg']:g} kg on the base",
+        "hindered": f"{settings['hindered_leg']} knee at {settings['hindered_fraction']:.0%} of its limit, "
+        f"{settings['load_kg']:g} kg",
+    }
+    fig, axes = plt.subplots(len(titles), 1, figsize=(10, 8), sharex=True)
+    for ax, (label, title) in zip(axes, titles.items(), strict=True):
+        for name in PLANNER_NAMES:
+            hits = summary["planners"][name]["crawls"][label]["torque_limit_steps"]
+            ax.plot(series[f"{name}_{label}_time"], np.minimum(series[f"{name}_{label}_torque_ratio"], 1.5),
+                    color=PLANNER_COLOURS[name], lw=0.8, label=f"{name}: {hits} steps at a limit")  # fmt: skip
+        ax.axhline(1.0, color="k", lw=0.8)
+        ax.set(ylabel="max |tau| / limit", title=f"{summary['robot']}: {title}")
+        ax.legend(fontsize=8, loc="lower right")
+    axes[-1].set_xlabel("time [s] (ratios above 1.5 drawn at 1.5)")
     return save_figure(fig, path)
 
 

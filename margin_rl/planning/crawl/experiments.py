@@ -310,9 +310,9 @@ def write_video(robot_name: str, out: str | Path) -> Path | None:
     with np.load(Path(out) / "crawl_series.npz") as series:
         clips = {name: series[f"{name}_loaded_qpos"] for name in ("heuristic", "fwp")}
     try:
-        # 20 frames/s at 480 x 270: software rendering (EGL on a CPU) takes ~0.1 s per frame
+        # 20 frames/s at 512 x 288 (multiples of the encoder's 8-pixel blocks): software rendering is slow
         return write_crawl_mp4(
-            robot, clips, Path(out) / "loaded_crawl.mp4", robot.mj_model.opt.timestep, fps=20, size=(480, 270)
+            robot, clips, Path(out) / "loaded_crawl.mp4", robot.mj_model.opt.timestep, fps=20, size=(512, 288)
         )
     except VideoUnavailableError as exc:
         print(f"no MP4: {exc}", file=sys.stderr)

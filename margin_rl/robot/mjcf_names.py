@@ -32,6 +32,7 @@ __all__ = [
     "JOINT_QVEL",
     "STANDING_KEYFRAME",
     "foot_contact_sensor",
+    "foot_geom",
     "shank_body",
     "thigh_contact_sensor",
 ]
@@ -82,6 +83,12 @@ def shank_body(leg: str) -> str:
     """The shank body of ``leg`` (``LF``, ``RF``, ``LH``, ``RH``); its origin is the knee (KFE) joint."""
     _check_leg(leg)
     return f"{leg}_SHANK"
+
+
+def foot_geom(leg: str) -> str:
+    """The collision sphere of ``leg``'s foot (its centre is the ``<leg>_FOOT`` site)."""
+    _check_leg(leg)
+    return f"{leg}_foot"
 
 
 def foot_contact_sensor(leg: str) -> str:

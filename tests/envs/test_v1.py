@@ -259,6 +259,7 @@ def test_every_mjcf_name_is_in_both_robots(robot_name: str) -> None:
         model.body(names.shank_body(leg))
         model.sensor(names.foot_contact_sensor(leg))
         model.sensor(names.thigh_contact_sensor(leg))
+        model.geom(names.foot_geom(leg))
     # the state layout: a free joint first, then the 12 joints
     assert model.jnt_type[0] == mujoco.mjtJoint.mjJNT_FREE and model.nq == 19 and model.nv == 18
     assert len(range(model.nq)[names.JOINT_QPOS]) == len(range(model.nv)[names.JOINT_QVEL]) == 12

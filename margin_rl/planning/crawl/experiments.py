@@ -27,7 +27,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import mujoco
 import numpy as np
 
 from margin_rl.atomic import atomic_savez, atomic_write_text
@@ -126,28 +125,16 @@ def along_crawl_measures(sim: CrawlSimulation, every: int = 20) -> dict[str, lis
     """§VI-B: the CWC margin and the FWP factor at every ``every``-th control step of the swing phases
     (the triple stances) of a finished crawl, re-simulated from the recorded states."""
     trace = sim.trace.arrays()
-    robot = sim.robot
     times, margins, factors, legs = [], [], [], []
-    load_force = np.array([0.0, 0.0, -sim.load_kg * robot.gravity])
-    base = sim.model.body("base").id
     for k in range(0, len(trace["time"]), every):
         phase = str(trace["phase"][k])
         if not phase.startswith("swing:"):
             continue
-        sim.data.qpos[:] = trace["qpos"][k]
-        mujoco.mj_kinematics(sim.model, sim.data)
-        mujoco.mj_comPos(sim.model, sim.data)
-        com = sim.data.subtree_com[base].copy()
-        stance = np.asarray(trace["stance"][k], dtype=bool)
-        load_torque = np.cross(sim.data.xipos[base] - com, load_force)
-        snapshot = StanceSnapshot(
-            com, sim.data.site_xpos[sim._feet_sites].copy(), stance, np.tile([0.0, 0.0, 1.0], (4, 1)), sim.mu,
-            load_force, load_torque, sim.torque_limits.copy(),
-        )  # fmt: skip
+        snapshot = sim.replayed_snapshot(trace["qpos"][k], trace["stance"][k])
         times.append(float(trace["time"][k]))
         legs.append(phase.split(":")[1])
-        margins.append(cwc_margin(robot, snapshot))
-        factors.append(fwp_factor(robot, snapshot))
+        margins.append(cwc_margin(sim.robot, snapshot))
+        factors.append(fwp_factor(sim.robot, snapshot))
     return {"time": times, "swing": legs, "cwc_margin": margins, "fwp_factor": factors}
 
 
@@ -181,7 +168,7 @@ def capacity_map(sim: CrawlSimulation, grid: int) -> dict[str, Any]:
     """The vertical capacity over CoM positions in the held triple stance's support triangle, shrunk by the
     crawl's stability margin (grid x grid over its bounding box; NaN outside it or out of the legs' reach)."""
     snapshot = sim.snapshot()
-    base_offset = sim.data.xpos[sim.model.body("base").id] - sim.com()
+    base_offset = sim.base_offset()
     triangle = support_triangle(snapshot.feet[:, :2], TESTED_SWING)
     a, b = triangle_halfplanes(triangle, sim.gait.stability_margin)
     inner = shrunk_triangle_vertices(a, b)

@@ -35,6 +35,7 @@ from margin_rl.robot.mjcf_names import (
     JOINT_QPOS,
     JOINT_QVEL,
     STANDING_KEYFRAME,
+    foot_geom,
 )
 
 FloatArray = NDArray[np.float64]
@@ -115,17 +116,14 @@ class CrawlSimulation:
         self.mu = float(self.model.geom(FLOOR_GEOM).friction[0])
         self.controller = QuasiStaticController(robot, self.torque_limits, self.mu, gains)
         self._base = self.model.body(BASE_BODY).id
-        self._feet_sites = [self.model.site(f"{leg}_FOOT").id for leg in LEGS]
-        self._feet_geoms = [self.model.geom(f"{leg}_foot").id for leg in LEGS]
+        self._feet_sites = [self.model.site(name).id for name in robot.foot_names]
+        self._feet_geoms = [self.model.geom(foot_geom(leg)).id for leg in LEGS]
         self._com_adr = self.model.sensor(COM_SENSOR).adr[0]
         self._com_vel_adr = self.model.sensor(COM_VELOCITY_SENSOR).adr[0]
         self._shanks = [self.model.geom_bodyid[g] for g in self._feet_geoms]
         self._leg_dofs = [self.model.jnt_dofadr[self.model.actuator_trnid[3 * i : 3 * i + 3, 0]] for i in range(4)]
         self._kp = np.asarray(robot.kp, dtype=float)
         self._kd = np.asarray(robot.kd, dtype=float)
-        self.trace = Trace()
-        self.plans: list[BaseMotionPlan] = []
-        self.time = 0.0
         self.reset()
 
     # ----------------------------------------------------------------- state
@@ -134,7 +132,7 @@ class CrawlSimulation:
         mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key(STANDING_KEYFRAME).id)
         mujoco.mj_forward(self.model, self.data)
         self.trace = Trace()
-        self.plans = []
+        self.plans: list[BaseMotionPlan] = []
         self.time = 0.0
         self.steps_taken = np.zeros(4, dtype=int)
         self.feet_des = self.feet()
@@ -299,6 +297,25 @@ class CrawlSimulation:
             self.com(), self.feet(), self.stance.copy(), np.tile([0.0, 0.0, 1.0], (4, 1)), self.mu, force, torque,
             self.torque_limits.copy(),
         )  # fmt: skip
+
+    def replayed_snapshot(self, qpos: np.ndarray, stance: np.ndarray) -> StanceSnapshot:
+        """The :class:`StanceSnapshot` of a recorded state (``qpos`` (19,), ``stance`` (4,)), with the load.
+
+        Sets the simulation's state to ``qpos`` (positions only): use it on a finished run.
+        """
+        self.data.qpos[:] = qpos
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_comPos(self.model, self.data)
+        com = self.data.subtree_com[self._base].copy()
+        load_f = np.array([0.0, 0.0, -self.load_kg * self.robot.gravity])
+        return StanceSnapshot(
+            com, self.feet(), np.asarray(stance, dtype=bool).copy(), np.tile([0.0, 0.0, 1.0], (4, 1)), self.mu,
+            load_f, np.cross(self.data.xipos[self._base] - com, load_f), self.torque_limits.copy(),
+        )  # fmt: skip
+
+    def base_offset(self) -> FloatArray:
+        """(3,) the base origin relative to the CoM [m, W] (where the tests push)."""
+        return self.data.xpos[self._base] - self.com()
 
     def base_motion(self, plan: BaseMotionPlan) -> None:
         self.plans.append(plan)

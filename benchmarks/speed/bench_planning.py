@@ -6,9 +6,10 @@ finite differences, side by side in one process.
 The problem: ANYmal C (or --robot), walk gait, T = 3 s, dT = 0.2 s, from standing at rest to a target
 0.45 m ahead at the walk's speed, on the ``course`` map at its start (flat there) or --scenario.
 Rows: IPOPT iterations, total solve time and time per iteration (medians over repeats), with IPOPT's
-quasi-Newton Hessian and with the exact one (``PlannerConfig(hessian="exact")``); the analytic
-variant is capped at --analytic-iterations iterations (each takes about a second), so only its time per
-iteration compares; a third row without any margin constraint shows the rest of the problem's cost.
+exact Hessian (the default, ``PlannerConfig(hessian="exact")``) and with its quasi-Newton one; the analytic
+variant (quasi-Newton: finite differences give first derivatives only) is capped at --analytic-iterations
+iterations (each takes about a second), so only its time per iteration compares; a row without any margin
+constraint shows the rest of the problem's cost.
 """
 
 from __future__ import annotations
@@ -54,10 +55,12 @@ def main() -> None:
     footholds = np.column_stack([xy, hm.height(xy)])
 
     variants = {
-        "learned (CasADi MLP, exact gradient)": PlannerConfig(),
-        "learned, exact Hessian (block Hessians in numpy)": PlannerConfig(hessian="exact"),
-        "analytic + finite differences": PlannerConfig(margin="analytic_fd", max_iter=args.analytic_iterations),
-        "no margin constraint": PlannerConfig(margin="none"),
+        "learned, quasi-Newton (L-BFGS)": PlannerConfig(hessian="quasi-newton"),
+        "learned, exact Hessian (block Hessians in numpy; the default)": PlannerConfig(hessian="exact"),
+        "analytic + finite differences (quasi-Newton)": PlannerConfig(
+            margin="analytic_fd", hessian="quasi-newton", max_iter=args.analytic_iterations
+        ),
+        "no margin constraint (quasi-Newton)": PlannerConfig(margin="none", hessian="quasi-newton"),
     }
     problems = {}
     for name, config in variants.items():

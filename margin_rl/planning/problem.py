@@ -111,9 +111,10 @@ class PlannerConfig:
     weight_acc: float = 0.02  # w_a [s^3/m^2]
     weight_centroid: float = 0.0  # w_c, contrast only
     max_iter: int = 150
-    # IPOPT's Hessian of the Lagrangian: "quasi-newton" (L-BFGS, ~80-90 iterations per horizon) or "exact" (the
-    # network's block-diagonal second derivatives in numpy, margin_rl.planning.mlp: ~8-9 iterations)
-    hessian: str = "quasi-newton"
+    # IPOPT's Hessian of the Lagrangian: "exact" (the network's block-diagonal second derivatives in numpy,
+    # margin_rl.planning.mlp: 8-17 iterations per horizon, every horizon of the eight courses converged) or
+    # "quasi-newton" (L-BFGS: 80-120 iterations, 87-100 % converged; the analytic_fd margin has only first derivatives)
+    hessian: str = "exact"
     tol: float = 1e-3  # IPOPT tol (scaled optimality error); constraints are met to constr_viol_tol 1e-4
     fd_step: float = 2e-3  # finite-difference step of the analytic_fd margin (lambda units)
     # Half-widths of the box around the target state (BaseState.as_vector order). Lateral position, height,
@@ -128,6 +129,11 @@ class PlannerConfig:
             raise ValueError(f"margin must be one of {', '.join(MARGIN_KINDS)}, got {self.margin!r}")
         if self.hessian not in HESSIANS:
             raise ValueError(f"PlannerConfig.hessian must be one of {', '.join(HESSIANS)}, got {self.hessian!r}")
+        if self.margin == "analytic_fd" and self.hessian == "exact":
+            raise ValueError(
+                "the analytic_fd margin has first derivatives only (finite differences): use "
+                "PlannerConfig(margin='analytic_fd', hessian='quasi-newton')"
+            )
         positive = ("horizon", "node_dt", "mu", "max_com_acc_xy", "max_com_acc_z", "max_euler_acc", "max_tilt")
         for name in (*positive, "max_com_vel_xy", "tol", "fd_step"):
             value = getattr(self, name)

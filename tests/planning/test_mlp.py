@@ -79,3 +79,7 @@ def test_exact_hessian_planner_converges_in_few_iterations(model_c, margin_c):
     assert np.min(margin_c(problem.plan_lambdas(plan))) >= problem.margin_bound - 1e-3
     with pytest.raises(ValueError, match="hessian"):
         PlannerConfig(hessian="newton")
+    assert PlannerConfig().hessian == "exact"
+    with pytest.raises(ValueError, match="first derivatives only"):
+        PlannerConfig(margin="analytic_fd")
+    assert PlannerConfig(margin="analytic_fd", hessian="quasi-newton").hessian == "quasi-newton"

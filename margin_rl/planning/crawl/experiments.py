@@ -9,9 +9,10 @@ hindered crawls, and the summary ``crawl.json``.
   positions on a grid over the support triangle, the downward force on the base origin at which the FWP
   factor reaches zero (bisection on :func:`~margin_rl.planning.crawl.evaluation.fwp_factor`), with the
   three planners' poses on it;
-* §VI-C: 12-step crawls with the ``load_kg`` load, with a heavier load (``heavy_load_kg``), and with a
-  hindered joint (``hindered``) plus the load: control steps with a servo at its torque limit, the
-  base-motion durations chosen, the planners' solve times and the FWP build times;
+* §VI-C: 12-step crawls with the ``load_kg`` load, with a heavier load (``heavy_load_kg``), with a
+  hindered joint (``hindered``) plus the load, and on rough ground (level tiles up to ``rough_max_height``)
+  with the load: control steps with a servo at its torque limit, falls, the base-motion durations
+  chosen, the planners' solve times and the FWP build times;
 
 and, once, §VI-B: the CWC margin and the FWP factor sampled along the heuristic crawl's triple stances
 with and without the load. Every number in ``crawl.json`` is measured here; nothing is carried over.
@@ -49,6 +50,7 @@ from margin_rl.planning.crawl.stance_tests import (
     triple_stance,
     vertical_disturbance_test,
 )
+from margin_rl.planning.crawl.terrain import TileTerrain
 from margin_rl.provenance import git_commit
 from margin_rl.robot import Robot, load_robot
 
@@ -66,6 +68,7 @@ class ExperimentSettings:
     hindered_leg: str = "LF"
     hindered_joint: int = 2  # KFE
     hindered_fraction: float = 0.6
+    rough_max_height: float = 0.05  # tiles of the rough crawl: tops up to this height [m]
     max_vertical_force: float = 2000.0
     capacity_grid: int = 15  # grid points per axis of the vertical capacity map
     steps: int = CRAWL_STEPS
@@ -86,10 +89,10 @@ def make_planners(robot: Robot, gait: CrawlGait) -> dict[str, CrawlPlanner]:
 
 def crawl(
     robot: Robot, gait: CrawlGait, planner: CrawlPlanner, steps: int, load_kg: float = 0.0,
-    hindered: HinderedJoint | None = None,
+    hindered: HinderedJoint | None = None, terrain: TileTerrain | None = None,
 ) -> tuple[CrawlSimulation, dict[str, Any]]:  # fmt: skip
     """Run ``steps`` crawl steps; returns the simulation and its summary (limits, durations, timings)."""
-    sim = CrawlSimulation(robot, gait, load_kg=load_kg, hindered=hindered)
+    sim = CrawlSimulation(robot, gait, load_kg=load_kg, hindered=hindered, terrain=terrain)
     started = len(sim.trace.time)
     error = ""
     try:
@@ -205,6 +208,7 @@ def run_experiments(settings: ExperimentSettings, out: str | Path, log: bool = T
     planners = make_planners(robot, gait)
     heavy_kg = round(settings.heavy_load_fraction * robot.total_mass, 1)
     hindered = HinderedJoint(settings.hindered_leg, settings.hindered_joint, settings.hindered_fraction)
+    rough = TileTerrain(max_height=settings.rough_max_height)
     summary: dict[str, Any] = {
         "robot": settings.robot, "settings": asdict(settings), "gait": asdict(gait),
         "time_weights": {n: getattr(p, "time_weight", None) for n, p in planners.items()},
@@ -233,9 +237,13 @@ def run_experiments(settings: ExperimentSettings, out: str | Path, log: bool = T
             f"s = 0 at {displacement.s_zero_shift:.3f} m"
         )
         crawls = {}
-        for label, load, hind in (("loaded", settings.load_kg, None), ("heavy", heavy_kg, None),
-                                  ("hindered", settings.load_kg, hindered)):  # fmt: skip
-            crawl_sim, crawl_summary = crawl(robot, gait, planner, settings.steps, load, hind)
+        for label, load, hind, ground in (
+            ("loaded", settings.load_kg, None, None),
+            ("heavy", heavy_kg, None, None),
+            ("hindered", settings.load_kg, hindered, None),
+            ("rough", settings.load_kg, None, rough),
+        ):
+            crawl_sim, crawl_summary = crawl(robot, gait, planner, settings.steps, load, hind, ground)
             crawls[label] = crawl_summary
             say(f"{label} crawl: {crawl_summary['torque_limit_steps']} control steps at a torque limit")
             trace = crawl_sim.trace.arrays()
@@ -263,6 +271,7 @@ def run_experiments(settings: ExperimentSettings, out: str | Path, log: bool = T
             "torque_limit_hits_loaded_crawl": crawls["loaded"]["torque_limit_steps"],
             "torque_limit_hits_heavy_crawl": crawls["heavy"]["torque_limit_steps"],
             "torque_limit_hits_hindered_crawl": crawls["hindered"]["torque_limit_steps"],
+            "torque_limit_hits_rough_crawl": crawls["rough"]["torque_limit_steps"],
             "solve_ms_median": float(np.median(solve_ms)),
             "polytope_ms_median": float(np.median(polytope_ms)) if any(polytope_ms) else 0.0,
             "crawls": crawls,

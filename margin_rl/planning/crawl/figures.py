@@ -7,8 +7,8 @@
   the planners' CoM positions;
 * ``along_crawl.png``: the CWC margin and the FWP factor along the heuristic crawl's triple stances with
   and without the load (Fig. 6);
-* ``loaded_crawl.png``: the largest joint torque relative to its limit along the loaded, heavy and hindered
-  crawls.
+* ``loaded_crawl.png``: the largest joint torque relative to its limit along the loaded, heavy, hindered
+  and rough-ground crawls.
 """
 
 from __future__ import annotations
@@ -104,8 +104,9 @@ def loaded_crawl_figure(summary: dict, series: dict, path: Path) -> Path:
         "heavy": f"{summary['heavy_load_kg']:g} kg on the base",
         "hindered": f"{settings['hindered_leg']} knee at {settings['hindered_fraction']:.0%} of its limit, "
         f"{settings['load_kg']:g} kg",
+        "rough": f"tiles up to {100 * settings['rough_max_height']:g} cm high, {settings['load_kg']:g} kg",
     }
-    fig, axes = plt.subplots(len(titles), 1, figsize=(10, 8), sharex=True)
+    fig, axes = plt.subplots(len(titles), 1, figsize=(10, 10), sharex=True)
     for ax, (label, title) in zip(axes, titles.items(), strict=True):
         for name in PLANNER_NAMES:
             hits = summary["planners"][name]["crawls"][label]["torque_limit_steps"]

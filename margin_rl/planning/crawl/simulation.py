@@ -1,8 +1,9 @@
 """The crawl executed in MuJoCo on the robot's MJCF, with real joint torques and their limits.
 
 :class:`CrawlSimulation` owns one MuJoCo model and data of the robot on flat ground (the scene file),
-optionally with a carried load (a constant downward force on the base body, at its CoM) and a hindered
-joint (one actuator's force range reduced; the planners and the controller are told). It runs crawl
+optionally with a carried load (a constant downward force on the base body, at its CoM), a hindered
+joint (one actuator's force range reduced; the planners and the controller are told) and rough ground
+(:class:`~margin_rl.planning.crawl.terrain.TileTerrain`: level tiles at random heights). It runs crawl
 steps (:meth:`CrawlSimulation.crawl_step`: plan the base motion, move the base, swing a leg) and holds a
 pose while a test pushes (:meth:`CrawlSimulation.hold`). Every control step is recorded in a
 :class:`Trace`: time, CoM, planned CoM, joint torques asked of the servos and whether any was at its
@@ -24,6 +25,7 @@ from margin_rl.planning.crawl.controller import ControllerGains, QuasiStaticCont
 from margin_rl.planning.crawl.gait import LEGS, CrawlGait, leg_index, next_foothold, swing_leg
 from margin_rl.planning.crawl.planners import BaseMotionPlan, BaseMotionTask, CrawlPlanner
 from margin_rl.planning.crawl.polytopes import StanceSnapshot
+from margin_rl.planning.crawl.terrain import TileTerrain
 from margin_rl.robot import Robot
 from margin_rl.robot.mjcf_names import (
     BASE_ANGULAR_VELOCITY_QVEL,
@@ -99,11 +101,18 @@ class CrawlSimulation:
         load_kg: float = 0.0,
         hindered: HinderedJoint | None = None,
         gains: ControllerGains | None = None,
+        terrain: TileTerrain | None = None,
     ) -> None:
         if not (np.isfinite(load_kg) and load_kg >= 0):
             raise ValueError(f"load_kg must be >= 0, got {load_kg!r}")
         self.robot, self.gait, self.load_kg, self.hindered = robot, gait, float(load_kg), hindered
-        self.model = mujoco.MjModel.from_xml_path(str(robot.scene_path))
+        self.terrain = terrain
+        if terrain is None:
+            self.model = mujoco.MjModel.from_xml_path(str(robot.scene_path))
+        else:
+            spec = mujoco.MjSpec.from_file(str(robot.scene_path))
+            terrain.add_to(spec, friction=float(spec.geom(FLOOR_GEOM).friction[0]))
+            self.model = spec.compile()
         # MuJoCo's soft friction lets a foot creep under a steady tangential force (~2 cm/s at 50 N);
         # the no-slip pass makes static friction hold, as a statically stable crawl assumes.
         self.model.opt.noslip_iterations = NOSLIP_ITERATIONS
@@ -282,7 +291,10 @@ class CrawlSimulation:
         """Where ``leg`` lands on its next step (:func:`next_foothold`), from its planned foothold, not the
         measured touchdown, so that landing errors do not accumulate."""
         i = leg_index(leg)
-        return next_foothold(self.footholds[i], self.gait.stride, self.steps_taken[i] == 0, self.footholds[i, 2])
+        target = next_foothold(self.footholds[i], self.gait.stride, self.steps_taken[i] == 0, self.footholds[i, 2])
+        if self.terrain is not None:  # the foot-sphere centre on the tile under the foothold
+            target[2] = self.terrain.height(target[0], target[1]) + self.robot.foot_radius
+        return target
 
     def snapshot(self, disturbance: np.ndarray | None = None) -> StanceSnapshot:
         """The current pose as a :class:`StanceSnapshot`: measured CoM and feet, the stance, the load and a

@@ -7,6 +7,7 @@ import pytest
 
 from margin_rl.planning.crawl import CrawlSimulation, HeuristicPlanner, HinderedJoint
 from margin_rl.planning.crawl.stance_tests import displacement_test, triple_stance, vertical_disturbance_test
+from margin_rl.planning.crawl.terrain import TileTerrain
 
 
 def test_the_controller_holds_and_moves_the_standing_robot(robot_c, gait):
@@ -74,3 +75,27 @@ def test_a_crawl_replays_into_an_mp4(robot_c, gait, tmp_path):
     except VideoUnavailableError as exc:
         pytest.skip(str(exc))
     assert mp4.stat().st_size > 1000
+
+
+def test_the_crawl_steps_onto_level_tiles_at_their_heights(robot_c, gait):
+    """Rough ground: the footholds take the height of the tile under them, and the robot walks onto them."""
+    terrain = TileTerrain(max_height=0.05, seed=0)
+    sim = CrawlSimulation(robot_c, gait, terrain=terrain)
+    planner = HeuristicPlanner(gait)
+    for step in range(4):
+        sim.crawl_step(step, planner)
+    for foothold in sim.footholds:
+        expected = terrain.height(foothold[0], foothold[1]) + robot_c.foot_radius
+        assert foothold[2] == pytest.approx(expected)
+    assert np.ptp(sim.footholds[:, 2]) > 0.01  # the feet stand at different heights
+    assert np.abs(sim.feet() - sim.footholds).max() < 0.03
+    assert sim.data.qpos[2] > 0.9 * robot_c.standing_height
+
+
+def test_tiles_are_level_and_flat_under_the_standing_robot():
+    terrain = TileTerrain(max_height=0.05, seed=3)
+    assert terrain.height(0.45, 0.3) == terrain.height(-0.45, -0.3) == 0.0
+    assert terrain.heights.min() >= 0.0 and terrain.heights.max() <= 0.05
+    assert terrain.height(10.0, 0.0) == 0.0  # beyond the tiles: the floor
+    with pytest.raises(ValueError, match="ranges must be increasing"):
+        TileTerrain(x_range=(1.0, 0.0))

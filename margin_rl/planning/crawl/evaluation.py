@@ -1,8 +1,9 @@
 """The two feasibility measures of seed 004 §VI, evaluated on a simulated crawl pose.
 
-* :func:`fwp_factor`: the FWP feasibility factor s (eq. 24) of the pose, with the joint-torque limits
-  the simulation uses (:func:`~margin_rl.stability.fwp.feasibility.contact_problem_polytope`, so a
-  hindered joint counts), about the CoM, quasi-static (no CoM acceleration: the tests are slow).
+* :func:`fwp_factor`: the FWP feasibility factor s (eq. 24) of the pose
+  (:func:`~margin_rl.stability.fwp.feasibility.fwp_feasibility` with the joint-torque limits the
+  simulation uses, so a hindered joint counts), about the CoM, quasi-static (no CoM acceleration: the
+  tests are slow).
 * :func:`cwc_margin`: the "CWC margin" of §VI-B, eq. (24) on the V-description of the bounded contact
   wrench cone (:mod:`~margin_rl.planning.crawl.polytopes`, kind ``"cwc"``), centred on its vertex
   centroid as the paper centres the FWP.
@@ -14,26 +15,17 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from margin_rl.planning.crawl.polytopes import StanceSnapshot, stance_polytope
 from margin_rl.robot import Robot
 from margin_rl.stability.analytic.contact_problem import contact_problem
-from margin_rl.stability.fwp.factor import feasibility_factor, minkowski_feasibility_factor
-from margin_rl.stability.fwp.polytope import feasible_wrench_polytope
+from margin_rl.stability.fwp.factor import feasibility_factor
+from margin_rl.stability.fwp.feasibility import fwp_feasibility
 
 
 def fwp_factor(robot: Robot, snapshot: StanceSnapshot, n_faces: int = 4) -> float:
     """s of eq. (24) for the pose, in the FWP with ``snapshot.torque_limits``; NaN where the pose has no
-    contact problem (unreachable feet, fewer than one foot down)."""
-    problem = contact_problem(robot, snapshot.lam()[None])[0]
-    if problem.status not in ("ok", "infeasible"):
-        return math.nan
-    polytope = feasible_wrench_polytope(
-        problem.contact_points, problem.normals, problem.stance, problem.mu, problem.jacobians,
-        np.asarray(snapshot.torque_limits, dtype=float), problem.leg_bias, n_faces=n_faces, prune=False,
-    )  # fmt: skip
-    return float(minkowski_feasibility_factor(polytope, problem.wrench).s)
+    contact problem (unreachable feet, no foot down)."""
+    return fwp_feasibility(robot, snapshot.lam(), n_faces=n_faces, torque_limits=snapshot.torque_limits).s
 
 
 def cwc_margin(robot: Robot, snapshot: StanceSnapshot) -> float:

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from margin_rl.robot import Robot
 from margin_rl.stability.analytic.contact_problem import contact_problem
 from margin_rl.stability.analytic.lambda_state import StabilityState
+from margin_rl.stability.fwp.feasibility import contact_problem_polytope
 from margin_rl.stability.fwp.polytope import FeasibleWrenchPolytope, feasible_wrench_polytope
 
 FloatArray = NDArray[np.float64]
@@ -161,15 +162,13 @@ def stance_polytope(robot: Robot, snapshot: StanceSnapshot, kind: str, n_faces: 
     if problem.status not in ("ok", "infeasible"):  # "infeasible" = CoM below the feet: irrelevant here
         raise ValueError(f"the crawl pose is not a valid stance ({problem.status}): {problem.message}")
     if kind == "fwp":
-        jacobians, limits, bias = problem.jacobians, np.asarray(snapshot.torque_limits, float), problem.leg_bias
+        polytope = contact_problem_polytope(problem, n_faces=n_faces, torque_limits=snapshot.torque_limits)
     else:  # friction only: the torque polytope replaced by a force cap of the robot's weight per contact
         cap = robot.total_mass * robot.gravity
-        jacobians = np.broadcast_to(np.eye(3), (4, 3, 3))
-        limits, bias = np.full((4, 3), cap), np.zeros((4, 3))
-    polytope = feasible_wrench_polytope(
-        problem.contact_points, problem.normals, problem.stance, problem.mu, jacobians, limits, bias,
-        n_faces=n_faces, prune=True,
-    )  # fmt: skip
+        polytope = feasible_wrench_polytope(
+            problem.contact_points, problem.normals, problem.stance, problem.mu,
+            np.broadcast_to(np.eye(3), (4, 3, 3)), np.full((4, 3), cap), np.zeros((4, 3)), n_faces=n_faces,
+        )  # fmt: skip
     if polytope.dim != 6 or polytope.n_vertices == 0:
         raise ValueError(f"the {kind} polytope of this stance is not 6-D (dim {polytope.dim}): check the feet")
     v = polytope.vertices.T

@@ -230,28 +230,44 @@ class FWPFeasibility:
 
 
 def contact_problem_polytope(
-    problem: ContactProblem, n_faces: int = DEFAULT_N_FACES, prune: bool = True
+    problem: ContactProblem,
+    n_faces: int = DEFAULT_N_FACES,
+    prune: bool = True,
+    torque_limits: ArrayLike | None = None,
 ) -> FeasibleWrenchPolytope:
     """:func:`feasible_wrench_polytope` of one state's contacts.
 
     ``problem``: one state's problem, ``contact_problem(robot, lams)[i]``
-    (:func:`~margin_rl.stability.analytic.contact_problem.contact_problem`).
+    (:func:`~margin_rl.stability.analytic.contact_problem.contact_problem`). ``torque_limits`` (4, 3):
+    symmetric joint-torque limits [N m] in place of the robot's (a hindered joint, a derated drive).
     """
+    limits = problem.torque_limits if torque_limits is None else _torque_limits(torque_limits)
     return feasible_wrench_polytope(
         problem.contact_points,
         problem.normals,
         problem.stance,
         problem.mu,
         problem.jacobians,
-        problem.torque_limits,
+        limits,
         problem.leg_bias,
         n_faces=n_faces,
         prune=prune,
     )
 
 
+def _torque_limits(value: ArrayLike) -> FloatArray:
+    limits = np.asarray(value, dtype=float)
+    if limits.shape != (4, 3) or not np.all(np.isfinite(limits)) or np.any(limits <= 0):
+        raise ValueError(f"torque_limits must be positive finite numbers of shape (4, 3) [N m], got {limits.shape}")
+    return limits
+
+
 def fwp_feasibility(
-    robot: Robot, lam: ArrayLike, n_faces: int = DEFAULT_N_FACES, prune: bool = False
+    robot: Robot,
+    lam: ArrayLike,
+    n_faces: int = DEFAULT_N_FACES,
+    prune: bool = False,
+    torque_limits: ArrayLike | None = None,
 ) -> FWPFeasibility:
     r"""FWP feasibility factor of one state lambda (the same input as the analytic margin).
 
@@ -277,6 +293,8 @@ def fwp_feasibility(
         False (default): eq. (24) on the summands (:func:`minkowski_feasibility_factor`), a few ms.
         True: build the pruned V-description and solve eq. (24) on its vertices, as the paper does
         (same ``s``; ~0.1-0.3 s for 4 contacts); ``n_vertices`` is then reported.
+    torque_limits : (4, 3) array_like, optional
+        Symmetric joint-torque limits [N m] in place of ``robot.torque_limits`` (a hindered joint).
 
     Returns
     -------
@@ -291,6 +309,7 @@ def fwp_feasibility(
     """
     t0 = time.perf_counter()
     check_n_faces(n_faces)
+    limits = None if torque_limits is None else _torque_limits(torque_limits)
     lam = check_lambda(lam)
     if lam.shape != (LAMBDA_DIM,):
         raise ValueError(f"one lambda of shape ({LAMBDA_DIM},) is expected, got {lam.shape}")
@@ -301,7 +320,7 @@ def fwp_feasibility(
         timings = {"kinematics": t1 - t0, "total": time.perf_counter() - t0}
         return FWPFeasibility(math.nan, problem.status, nan_wrench, (), None, (), timings, problem.message)
 
-    fwp = contact_problem_polytope(problem, n_faces=n_faces, prune=prune)
+    fwp = contact_problem_polytope(problem, n_faces=n_faces, prune=prune, torque_limits=limits)
     wrench = frozen_array(problem.wrench)
     t2 = time.perf_counter()
     if prune and fwp.n_vertices > 0:

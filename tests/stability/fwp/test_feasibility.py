@@ -456,3 +456,17 @@ def test_bad_polytope_inputs_raise_naming_the_argument(problem) -> None:
         polytope(problem, stance=[1, 0, 2, 1])
     with pytest.raises(ValueError, match=r"jacobians\[1\]"):
         polytope(problem, jacobians=np.concatenate([problem.jacobians[:1], np.zeros((3, 3, 3))]))
+
+
+def test_torque_limits_override_the_robots_own():
+    """The robot's own limits passed explicitly give the same s; drives of 1 N m cannot hold the robot up
+    (s < 0, the actuation limits violated) where its own drives can; malformed limits are refused by name."""
+    robot = load_robot("anymal_c")
+    lam = standing_state(robot)
+    own = fwp_feasibility(robot, lam)
+    same = fwp_feasibility(robot, lam, torque_limits=np.asarray(robot.torque_limits).reshape(4, 3))
+    assert own.s > 0 and same.s == pytest.approx(own.s, abs=1e-9)
+    weak = fwp_feasibility(robot, lam, torque_limits=np.ones((4, 3)))
+    assert weak.s < 0 and "actuation" in weak.violated
+    with pytest.raises(ValueError, match=r"torque_limits must be positive finite numbers of shape \(4, 3\)"):
+        fwp_feasibility(robot, lam, torque_limits=np.ones(12))

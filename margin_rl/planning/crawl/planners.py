@@ -233,7 +233,6 @@ class HeuristicPlanner:
 class _Program:
     solver: ca.Function
     cost: ca.Function  # (x, p) -> the objective, for checks against an independent implementation
-    constraints: ca.Function  # (x, p) -> g
     n_knots: int
     n_params: int
 
@@ -299,9 +298,7 @@ def _build_program(knots: int) -> _Program:
         "ipopt.max_iter": 200,
     }
     solver = ca.nlpsol("crawl_base_motion", "ipopt", {"x": x, "p": p, "f": cost, "g": g_all}, options)
-    return _Program(
-        solver, ca.Function("cost", [x, p], [cost]), ca.Function("constraints", [x, p], [g_all]), n, int(p.shape[0])
-    )
+    return _Program(solver, ca.Function("cost", [x, p], [cost]), n, int(p.shape[0]))
 
 
 class WrenchPolytopePlanner:

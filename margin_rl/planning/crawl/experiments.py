@@ -24,7 +24,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -148,10 +148,10 @@ def vertical_capacity(robot: Robot, snapshot: StanceSnapshot, base_offset: np.nd
 
     def factor(force: float) -> float:
         d = np.array([0.0, 0.0, -force])
-        return fwp_factor(robot, StanceSnapshot(
-            snapshot.com, snapshot.feet, snapshot.stance, snapshot.normals, snapshot.mu,
-            snapshot.ext_force + d, snapshot.ext_torque + np.cross(base_offset, d), snapshot.torque_limits,
-        ))  # fmt: skip
+        pushed = replace(
+            snapshot, ext_force=snapshot.ext_force + d, ext_torque=snapshot.ext_torque + np.cross(base_offset, d)
+        )
+        return fwp_factor(robot, pushed)
 
     at_rest = factor(0.0)
     if math.isnan(at_rest):
@@ -181,11 +181,7 @@ def capacity_map(sim: CrawlSimulation, grid: int) -> dict[str, Any]:
     for i, y in enumerate(ys):
         for j, x in enumerate(xs):
             if np.all(a @ np.array([x, y]) <= b + 1e-9):
-                com = np.array([x, y, snapshot.com[2]])
-                moved = StanceSnapshot(
-                    com, snapshot.feet, snapshot.stance, snapshot.normals, snapshot.mu, snapshot.ext_force,
-                    snapshot.ext_torque, snapshot.torque_limits,
-                )  # fmt: skip
+                moved = replace(snapshot, com=np.array([x, y, snapshot.com[2]]))
                 values[i, j] = vertical_capacity(sim.robot, moved, base_offset)
     best = np.unravel_index(np.nanargmax(values), values.shape)
     return {

@@ -69,13 +69,6 @@ class StanceSnapshot:
     ext_torque: FloatArray
     torque_limits: FloatArray
 
-    def with_stance(self, stance: NDArray[np.bool_]) -> StanceSnapshot:
-        """The same pose with another set of feet on the ground."""
-        return StanceSnapshot(
-            self.com, self.feet, np.asarray(stance, dtype=bool), self.normals, self.mu, self.ext_force,
-            self.ext_torque, self.torque_limits,
-        )  # fmt: skip
-
     def lam(self) -> FloatArray:
         """lambda (47,) of the static pose (zero CoM velocity and acceleration, level base)."""
         zero = np.zeros(3)
@@ -129,21 +122,6 @@ class StancePolytope:
         """The running cost of eq. (28), squared and scaled: n_v ||lambda - lambda_0||^2 (see the module)."""
         d = np.asarray(wrench, dtype=float) - self.centroid
         return float(d @ self.metric @ d)
-
-
-def static_wrench(
-    mass: float, gravity: float, com_offset: np.ndarray, acc_xy: np.ndarray, snapshot: StanceSnapshot
-) -> FloatArray:
-    r"""Gravito-inertial wrench (6,) the contacts must produce, moments about the snapshot's CoM c_0.
-
-    With the CoM at :math:`c_0 + \delta` (``com_offset`` (3,)), horizontal acceleration ``acc_xy`` and the
-    snapshot's external wrench (which moves with the base): :math:`F = m(\ddot c + g e_z) - f_{ext}` and
-    :math:`\tau = \delta \times F - \tau_{ext}`; no angular momentum rate (the base does not rotate).
-    """
-    acc = np.array([acc_xy[0], acc_xy[1], 0.0])
-    force = mass * (acc + np.array([0.0, 0.0, gravity])) - np.asarray(snapshot.ext_force, dtype=float)
-    moment = np.cross(np.asarray(com_offset, dtype=float), force) - np.asarray(snapshot.ext_torque, dtype=float)
-    return np.concatenate([force, moment])
 
 
 def stance_polytope(robot: Robot, snapshot: StanceSnapshot, kind: str, n_faces: int = 4) -> StancePolytope:

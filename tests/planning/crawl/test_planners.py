@@ -11,7 +11,7 @@ import pytest
 from margin_rl.planning.crawl import PLANNER_NAMES, BaseMotionPlan, HeuristicPlanner, make_planner
 from margin_rl.planning.crawl.gait import triangle_halfplanes
 from margin_rl.planning.crawl.planners import BaseMotionTask, nearest_point_in_triangle
-from margin_rl.planning.crawl.polytopes import static_wrench
+from margin_rl.stability.geometry.contact import gravito_inertial_wrench
 
 from .conftest import standing_task
 
@@ -61,15 +61,15 @@ def _numpy_cost(planner, task, four, triple, x: np.ndarray) -> float:
     px, py = np.r_[task.com_start[0], cx], np.r_[task.com_start[1], cy]
     qx, qy = np.r_[0.0, vx], np.r_[0.0, vy]
     ref = four.reference_com
-    snapshot = task.snapshot(ref, swing_lifted=False)
+    ext_f, ext_t = task.ext_force, task.ext_torque
     mass, g = planner.robot.total_mass, planner.robot.gravity
     running = 0.0
     for k in range(1, n + 1):
         acc = np.array([(qx[k] - qx[k - 1]) / h, (qy[k] - qy[k - 1]) / h])
         offset = np.array([px[k] - ref[0], py[k] - ref[1], 0.0])
-        running += four.cost(static_wrench(mass, g, offset, acc, snapshot))
+        running += four.cost(gravito_inertial_wrench(mass, [*acc, 0.0], (0, 0, 0), ext_f, ext_t, g, offset))
     offset = np.array([px[n] - ref[0], py[n] - ref[1], 0.0])
-    terminal = triple.cost(static_wrench(mass, g, offset, np.zeros(2), snapshot))
+    terminal = triple.cost(gravito_inertial_wrench(mass, (0, 0, 0), (0, 0, 0), ext_f, ext_t, g, offset))
     return running / n + terminal + planner.time_weight * dt
 
 

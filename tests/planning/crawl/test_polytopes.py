@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from margin_rl.planning.crawl.polytopes import stance_polytope, static_wrench
+from margin_rl.planning.crawl.polytopes import stance_polytope
 from margin_rl.stability.fwp.factor import feasibility_factor
+from margin_rl.stability.geometry.contact import gravito_inertial_wrench
 
 
 def test_metric_cost_equals_the_explicit_pseudo_inverse_weights(fwp_polytopes_c, robot_c):
@@ -27,7 +30,7 @@ def test_metric_cost_equals_the_explicit_pseudo_inverse_weights(fwp_polytopes_c,
 
 def test_the_standing_wrench_is_inside_both_kinds_of_polytope(robot_c, task_c):
     snapshot = task_c.snapshot(task_c.com_start, swing_lifted=False)
-    w = static_wrench(robot_c.total_mass, robot_c.gravity, np.zeros(3), np.zeros(2), snapshot)
+    w = gravito_inertial_wrench(robot_c.total_mass, gravity=robot_c.gravity)
     np.testing.assert_allclose(w, [0, 0, robot_c.total_mass * robot_c.gravity, 0, 0, 0])
     for kind in ("fwp", "cwc"):
         polytope = stance_polytope(robot_c, snapshot, kind)
@@ -47,4 +50,4 @@ def test_bad_kind_and_too_few_feet_are_named(robot_c, task_c):
     with pytest.raises(ValueError, match="unknown polytope kind 'awp'"):
         stance_polytope(robot_c, snapshot, "awp")
     with pytest.raises(ValueError, match="at least three feet"):
-        stance_polytope(robot_c, snapshot.with_stance(np.array([True, True, False, False])), "fwp")
+        stance_polytope(robot_c, dataclasses.replace(snapshot, stance=np.array([True, True, False, False])), "fwp")

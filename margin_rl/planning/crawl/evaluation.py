@@ -33,5 +33,5 @@ def cwc_margin(robot: Robot, snapshot: StanceSnapshot) -> float:
     problem = contact_problem(robot, snapshot.lam()[None])[0]
     if problem.status not in ("ok", "infeasible"):
         return math.nan
-    cwc = stance_polytope(robot, snapshot, "cwc")
+    cwc = stance_polytope(robot, snapshot, "cwc", problem=problem)
     return float(feasibility_factor(cwc.polytope.vertices, problem.wrench, length_scale=cwc.polytope.length_scale).s)

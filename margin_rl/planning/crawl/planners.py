@@ -316,13 +316,9 @@ class WrenchPolytopePlanner:
         q = robot.standing_joint_pos
         self.nominal_offsets = (robot.foot_positions(q) - robot.com_position(q))[:, :2]
 
-    def polytopes(
-        self, task: BaseMotionTask, reference: np.ndarray | None = None
-    ) -> tuple[StancePolytope, StancePolytope]:
-        """Four-foot and triple-stance polytopes at the heuristic plan's end pose (constant J(q_0), §V-A), or
-        with the CoM at ``reference`` (3,)."""
-        if reference is None:
-            reference = np.array([*self._heuristic.target(task), float(task.com_start[2])])
+    def polytopes(self, task: BaseMotionTask) -> tuple[StancePolytope, StancePolytope]:
+        """Four-foot and triple-stance polytopes at the heuristic plan's end pose (constant J(q_0), §V-A)."""
+        reference = np.array([*self._heuristic.target(task), float(task.com_start[2])])
         four = stance_polytope(self.robot, task.snapshot(reference, swing_lifted=False), self.kind)
         triple = stance_polytope(self.robot, task.snapshot(reference, swing_lifted=True), self.kind)
         return four, triple

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from margin_rl.robot import Robot
-from margin_rl.stability.analytic.contact_problem import contact_problem
+from margin_rl.stability.analytic.contact_problem import ContactProblem, contact_problem
 from margin_rl.stability.analytic.lambda_state import StabilityState
 from margin_rl.stability.fwp.feasibility import contact_problem_polytope
 from margin_rl.stability.fwp.polytope import FeasibleWrenchPolytope, feasible_wrench_polytope
@@ -124,8 +124,13 @@ class StancePolytope:
         return float(d @ self.metric @ d)
 
 
-def stance_polytope(robot: Robot, snapshot: StanceSnapshot, kind: str, n_faces: int = 4) -> StancePolytope:
+def stance_polytope(
+    robot: Robot, snapshot: StanceSnapshot, kind: str, n_faces: int = 4, problem: ContactProblem | None = None
+) -> StancePolytope:
     """The ``kind`` polytope of ``snapshot``'s stance, at its pose (IK, Jacobians and bias torques there).
+
+    ``problem``: the snapshot's contact problem where the caller has it already
+    (``contact_problem(robot, snapshot.lam()[None])[0]``).
 
     Raises:
         ValueError: unknown ``kind``; a pose the robot cannot reach or with fewer than three stance feet
@@ -136,7 +141,8 @@ def stance_polytope(robot: Robot, snapshot: StanceSnapshot, kind: str, n_faces: 
     if int(np.count_nonzero(snapshot.stance)) < 3:
         raise ValueError("a crawl stance polytope needs at least three feet on the ground")
     t0 = time.perf_counter()
-    problem = contact_problem(robot, snapshot.lam()[None])[0]
+    if problem is None:
+        problem = contact_problem(robot, snapshot.lam()[None])[0]
     if problem.status not in ("ok", "infeasible"):  # "infeasible" = CoM below the feet: irrelevant here
         raise ValueError(f"the crawl pose is not a valid stance ({problem.status}): {problem.message}")
     if kind == "fwp":

@@ -31,7 +31,6 @@ from margin_rl.robot.mjcf_names import (
     BASE_ANGULAR_VELOCITY_QVEL,
     BASE_BODY,
     BASE_POSITION_QPOS,
-    COM_SENSOR,
     COM_VELOCITY_SENSOR,
     FLOOR_GEOM,
     JOINT_QPOS,
@@ -127,7 +126,6 @@ class CrawlSimulation:
         self._base = self.model.body(BASE_BODY).id
         self._feet_sites = [self.model.site(name).id for name in robot.foot_names]
         self._feet_geoms = [self.model.geom(foot_geom(leg)).id for leg in LEGS]
-        self._com_adr = self.model.sensor(COM_SENSOR).adr[0]
         self._com_vel_adr = self.model.sensor(COM_VELOCITY_SENSOR).adr[0]
         self._shanks = [self.model.geom_bodyid[g] for g in self._feet_geoms]
         self._leg_dofs = [self.model.jnt_dofadr[self.model.actuator_trnid[3 * i : 3 * i + 3, 0]] for i in range(4)]
@@ -153,7 +151,8 @@ class CrawlSimulation:
         self.run(1.0, self._still, phase="settle")
 
     def com(self) -> FloatArray:
-        return self.data.sensordata[self._com_adr : self._com_adr + 3].copy()
+        """(3,) the robot's CoM [m, W] (MuJoCo's subtree CoM of the base, what the ``com`` sensor reads)."""
+        return self.data.subtree_com[self._base].copy()
 
     def com_vel(self) -> FloatArray:
         return self.data.sensordata[self._com_vel_adr : self._com_vel_adr + 3].copy()
@@ -165,10 +164,14 @@ class CrawlSimulation:
     def rotation(self) -> FloatArray:
         return self.data.xmat[self._base].reshape(3, 3).copy()
 
-    def load_wrench(self) -> tuple[FloatArray, FloatArray]:
-        """The carried load: force (3,) [N] at the base body's CoM and its moment (3,) about the robot's CoM."""
-        force = np.array([0.0, 0.0, -self.load_kg * self.robot.gravity])
-        return force, np.cross(self.data.xipos[self._base] - self.com(), force)
+    def external_wrench(self, disturbance: np.ndarray | None = None) -> tuple[FloatArray, FloatArray]:
+        """The external wrench on the robot: the carried load at the base body's CoM and a test's
+        ``disturbance`` (3,) [N] at the base origin; force (3,) [N] and moment (3,) about the robot's CoM [N m]."""
+        load = np.array([0.0, 0.0, -self.load_kg * self.robot.gravity])
+        push = np.zeros(3) if disturbance is None else np.asarray(disturbance, dtype=float)
+        com = self.com()
+        moment = np.cross(self.data.xipos[self._base] - com, load) + np.cross(self.data.xpos[self._base] - com, push)
+        return load + push, moment
 
     def normal_forces(self) -> FloatArray:
         """(4,) normal contact force on each foot [N] (MuJoCo's contact solution)."""
@@ -209,13 +212,14 @@ class CrawlSimulation:
         return out
 
     # ----------------------------------------------------------------- stepping
-    def _apply(self, force: np.ndarray, at_origin: bool) -> None:
-        """External force on the base (3,) [N]: at its CoM, or at its origin (a moment added)."""
-        xfrc = np.zeros(6)
-        xfrc[:3] = force
-        if at_origin:
-            xfrc[3:] = np.cross(self.data.xpos[self._base] - self.data.xipos[self._base], force)
-        self.data.xfrc_applied[self._base] = xfrc
+    def _apply(self, disturbance: np.ndarray) -> None:
+        """Write the load and the ``disturbance`` into the base's ``xfrc_applied`` (MuJoCo applies it at the
+        body's CoM, so the disturbance, meant for the base origin, brings its moment)."""
+        load = np.array([0.0, 0.0, -self.load_kg * self.robot.gravity])
+        self.data.xfrc_applied[self._base, :3] = load + disturbance
+        self.data.xfrc_applied[self._base, 3:] = np.cross(
+            self.data.xpos[self._base] - self.data.xipos[self._base], disturbance
+        )
 
     def run(
         self,
@@ -229,22 +233,13 @@ class CrawlSimulation:
         the base origin [N] (known to the controller), ``stop()`` ends the run early."""
         dt = self.model.opt.timestep
         steps = round(duration / dt)
-        load_f = np.array([0.0, 0.0, -self.load_kg * self.robot.gravity])
         for k in range(steps):
             t = k * dt
             com_des, vel_des, acc_des = com_reference(t)
             disturbance = np.zeros(3) if push is None else np.asarray(push(t), dtype=float)
             com = self.com()
-            # External wrench the controller is told: the load at the base CoM, the disturbance at the base origin.
-            ext_f = load_f + disturbance
-            ext_t = np.cross(self.data.xipos[self._base] - com, load_f) + np.cross(
-                self.data.xpos[self._base] - com, disturbance
-            )
-            self._apply(load_f, at_origin=False)
-            self.data.xfrc_applied[self._base, :3] += disturbance
-            self.data.xfrc_applied[self._base, 3:] += np.cross(
-                self.data.xpos[self._base] - self.data.xipos[self._base], disturbance
-            )
+            ext_f, ext_t = self.external_wrench(disturbance)  # the controller is told it
+            self._apply(disturbance)
             # Stance feet stay where they are (a sphere rolls a little as its shank turns).
             self.feet_des[self.stance] = self.feet()[self.stance]
             rotation = self.rotation()
@@ -280,7 +275,7 @@ class CrawlSimulation:
     # ----------------------------------------------------------------- the crawl
     def task(self, swing: str) -> BaseMotionTask:
         """The base-motion task of the step before ``swing`` lifts, from the desired CoM and the measured feet."""
-        load_f, load_t = self.load_wrench()
+        load_f, load_t = self.external_wrench()
         return BaseMotionTask(
             com_start=self.com_des.copy(), feet=self.feet(), swing=swing, normals=np.tile([0.0, 0.0, 1.0], (4, 1)),
             mu=self.mu, ext_force=load_f, ext_torque=load_t, torque_limits=self.torque_limits,
@@ -296,17 +291,13 @@ class CrawlSimulation:
             target[2] = self.terrain.height(target[0], target[1]) + self.robot.foot_radius
         return target
 
-    def snapshot(self, disturbance: np.ndarray | None = None) -> StanceSnapshot:
-        """The current pose as a :class:`StanceSnapshot`: measured CoM and feet, the stance, the load and a
-        test's ``disturbance`` (3,) [N] at the base origin as the external wrench (about the CoM)."""
-        load_f, load_t = self.load_wrench()
-        force, torque = load_f.copy(), load_t.copy()
-        if disturbance is not None:
-            d = np.asarray(disturbance, dtype=float)
-            force += d
-            torque += np.cross(self.data.xpos[self._base] - self.com(), d)
+    def snapshot(self, disturbance: np.ndarray | None = None, stance: np.ndarray | None = None) -> StanceSnapshot:
+        """The current pose as a :class:`StanceSnapshot`: measured CoM and feet, the stance (or ``stance`` (4,)),
+        the load and a test's ``disturbance`` (3,) [N] at the base origin as the external wrench."""
+        force, torque = self.external_wrench(disturbance)
+        feet_down = self.stance if stance is None else np.asarray(stance, dtype=bool)
         return StanceSnapshot(
-            self.com(), self.feet(), self.stance.copy(), np.tile([0.0, 0.0, 1.0], (4, 1)), self.mu, force, torque,
+            self.com(), self.feet(), feet_down.copy(), np.tile([0.0, 0.0, 1.0], (4, 1)), self.mu, force, torque,
             self.torque_limits.copy(),
         )  # fmt: skip
 
@@ -318,12 +309,7 @@ class CrawlSimulation:
         self.data.qpos[:] = qpos
         mujoco.mj_kinematics(self.model, self.data)
         mujoco.mj_comPos(self.model, self.data)
-        com = self.data.subtree_com[self._base].copy()
-        load_f = np.array([0.0, 0.0, -self.load_kg * self.robot.gravity])
-        return StanceSnapshot(
-            com, self.feet(), np.asarray(stance, dtype=bool).copy(), np.tile([0.0, 0.0, 1.0], (4, 1)), self.mu,
-            load_f, np.cross(self.data.xipos[self._base] - com, load_f), self.torque_limits.copy(),
-        )  # fmt: skip
+        return self.snapshot(stance=stance)
 
     def base_offset(self) -> FloatArray:
         """(3,) the base origin relative to the CoM [m, W] (where the tests push)."""

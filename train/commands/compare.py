@@ -9,6 +9,9 @@ Example::
 For the ANYmal ids, ``--margin-weight`` defaults to 0.2 and ``--env-option reward_params.alive_bonus`` to 0.1 for
 both variants: the shipped experiment (see :mod:`margin_rl.train.commands.options`).
 
+``--recipe NAME`` trains both variants with a training recipe of :mod:`margin_rl.train.recipes` (its environment
+options, environments, steps and margin weight; options given here replace the recipe's), e.g. ``--recipe robust``.
+
 For each variant (margin weight 0, and ``--margin-weight``) and each training seed, a run is trained into
 ``<out>/runs/mw<weight>__s<seed>`` (a finished run is reused, a stopped one resumed), then evaluated on the same
 fixed command and the same evaluation seeds. Both variants use the same margin model, so the margin is
@@ -65,6 +68,7 @@ from margin_rl.train.commands.options import (
 from margin_rl.train.commands.train import DEFAULT_BACKEND, DEFAULT_NUM_ENVS, TrainSpec, make_spec, train
 from margin_rl.train.environments import DEFAULT_ENV
 from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
+from margin_rl.train.recipes import RECIPES, get_recipe, with_recipe
 from margin_rl.train.runs import (
     CONFIG_FILE,
     PROGRESS_FILE,
@@ -92,6 +96,7 @@ class CompareSettings:
     forward_velocity: float = DEFAULT_FORWARD_VELOCITY  # the same command for every policy [m/s]
     warmup_s: float = 1.0
     device: str = "cpu"
+    recipe: str | None = None  # the training recipe (margin_rl.train.recipes) the runs are trained with, if any
 
     def __post_init__(self) -> None:
         if self.margin_weight <= 0:
@@ -115,6 +120,7 @@ def _run_spec(settings: CompareSettings, weight: float, seed: int, overrides: di
         total_steps=settings.total_steps,
         checkpoint_every=settings.checkpoint_every,
         device=settings.device,
+        recipe=settings.recipe,
     )
 
 
@@ -262,12 +268,19 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--margin-weight",
         type=float,
-        default=CLI_MARGIN_WEIGHT,
-        help=f"weight of the margin variant (default {CLI_MARGIN_WEIGHT:g}); {DEFAULTS_HELP}",
+        default=None,
+        help=f"weight of the margin variant (default {CLI_MARGIN_WEIGHT:g}, or the recipe's); {DEFAULTS_HELP}",
+    )
+    parser.add_argument(
+        "--recipe",
+        choices=tuple(RECIPES),
+        help="train both variants with a training recipe (margin_rl.train.recipes); options given here replace its",
     )
     parser.add_argument("--seeds", type=int, default=len(d.seeds), help="number of training seeds (0, 1, ...)")
-    parser.add_argument("--num-envs", type=int, default=d.num_envs)
-    parser.add_argument("--total-steps", type=int, default=d.total_steps, help="environment steps per run")
+    parser.add_argument("--num-envs", type=int, help=f"environments (default {d.num_envs}, or the recipe's)")
+    parser.add_argument(
+        "--total-steps", type=int, help=f"environment steps per run (default {d.total_steps}, or the recipe's)"
+    )
     parser.add_argument("--checkpoint-every", type=int, default=d.checkpoint_every)
     parser.add_argument("--eval-episodes", type=int, help=f"evaluation episodes per policy (default {d.eval_episodes})")
     parser.add_argument("--eval-seed", type=int, help=f"seed of the evaluation episodes (default {d.eval_seed})")
@@ -296,13 +309,22 @@ def _eval_overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
+    d = CompareSettings()
+    recipe = get_recipe(args.recipe) if args.recipe is not None else None
     return CompareSettings(
         env_id=args.env or DEFAULT_ENV,
         backend=args.backend,
-        margin_weight=args.margin_weight,
+        margin_weight=(
+            args.margin_weight
+            if args.margin_weight is not None
+            else recipe.margin_weight
+            if recipe
+            else CLI_MARGIN_WEIGHT
+        ),
         seeds=tuple(range(args.seeds)),
-        num_envs=args.num_envs,
-        total_steps=args.total_steps,
+        num_envs=args.num_envs or (recipe.num_envs if recipe else d.num_envs),
+        total_steps=args.total_steps or (recipe.total_steps if recipe else d.total_steps),
+        recipe=args.recipe,
         checkpoint_every=args.checkpoint_every,
         device=args.device,
         **_eval_overrides(args),
@@ -363,6 +385,8 @@ def main(argv: list[str] | None = None) -> int:
             settings = _settings_from_args(args)
             options = env_overrides(args)
             options.pop("margin_weight", None)  # each variant sets its own
+            if settings.recipe is not None:
+                options = with_recipe(get_recipe(settings.recipe), options)
             options = with_training_defaults(env_id, options, margin_weight=False)
             out = args.out or Path("runs") / f"compare__{env_id.split('/')[-1]}__{args.backend}"
             report = run_compare(settings, out, options, progress=not args.no_progress)

@@ -12,7 +12,10 @@ The environment, a batched ANYmal id, is the policy's training environment (its 
 (:func:`margin_rl.train.environments.anymal_id`).
 
 The command is fixed (``--forward-velocity``, default 0.75 m/s as in seed
-000 §V-C), episodes run in parallel from ``--seed``, each to its first termination or time limit. Outputs
+000 §V-C), and the world is an evaluation condition (``--condition``, default ``nominal``: the training
+environment without its friction, mass, push and observation-noise randomisation;
+:mod:`margin_rl.train.analysis.conditions`); environment options given apply on top of the condition. Episodes
+run in parallel from ``--seed``, each to its first termination or time limit. Outputs
 (default ``<run>/eval/``): ``metrics.json`` (every episode's metrics, see :mod:`margin_rl.train.metrics`, and
 their mean/std), ``episode.png`` (base accelerations, velocity, margin and stance width over the first episode)
 and, with ``--video``, ``episode.mp4`` of the first episode (needs imageio with its ffmpeg plugin and a GL
@@ -35,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from margin_rl.envs.config import CommandConfig, EnvConfig
+from margin_rl.train.analysis.conditions import CONDITIONS, DEFAULT_CONDITION, condition_config
 from margin_rl.train.analysis.episodes import Evaluation, run_episodes
 from margin_rl.train.analysis.media import plot_episode, write_video
 from margin_rl.train.artifacts.policies import LoadedPolicy, PolicyMismatchError, load_policy
@@ -62,9 +66,19 @@ def evaluation_env_id(policy: LoadedPolicy, env_id: str | None) -> str:
     return env_id or run.get("env_id") or DEFAULT_ENV
 
 
-def resolve_env(policy: LoadedPolicy, env_id: str | None, overrides: dict[str, Any] | None) -> tuple[str, EnvConfig]:
+def resolve_env(
+    policy: LoadedPolicy,
+    env_id: str | None,
+    overrides: dict[str, Any] | None,
+    condition: str = DEFAULT_CONDITION,
+) -> tuple[str, EnvConfig]:
     """The evaluation environment: the policy's training environment (its run config) unless ``env_id`` is
-    given, with EnvConfig field ``overrides``."""
+    given, in evaluation ``condition`` (:func:`~margin_rl.train.analysis.conditions.condition_config`), with
+    EnvConfig field ``overrides`` on top.
+
+    Raises:
+        ValueError: an unknown condition.
+    """
     run = policy.train_config
     if run is not None and run.get("env_config") is not None and (env_id is None or env_id == run.get("env_id")):
         env_id = run["env_id"]
@@ -72,7 +86,7 @@ def resolve_env(policy: LoadedPolicy, env_id: str | None, overrides: dict[str, A
     else:
         env_id = env_id or DEFAULT_ENV
         base = env_config_for(env_id)
-    return env_id, apply_overrides(base, dict(overrides or {}))
+    return env_id, apply_overrides(condition_config(base, condition), dict(overrides or {}))
 
 
 def evaluation_target(
@@ -80,16 +94,17 @@ def evaluation_target(
     env_id: str | None,
     overrides: Mapping[str, Any] | None,
     forward_velocity: float | None = DEFAULT_FORWARD_VELOCITY,
+    condition: str = DEFAULT_CONDITION,
 ) -> AnymalTarget:
-    """The environment to evaluate ``policy`` in (see the module docstring), with the fixed command
-    ``forward_velocity`` (:func:`evaluation_config`).
+    """The environment to evaluate ``policy`` in (see the module docstring): evaluation ``condition``, the fixed
+    command ``forward_velocity`` (:func:`evaluation_config`).
 
     Raises:
-        ValueError: not a batched ANYmal id. TypeError: unknown options.
+        ValueError: not a batched ANYmal id, an unknown condition. TypeError: unknown options.
     """
     target = evaluation_env_id(policy, env_id)
     anymal_id(target, "evaluate")
-    env_id, base = resolve_env(policy, target, dict(overrides or {}))
+    env_id, base = resolve_env(policy, target, dict(overrides or {}), condition)
     return AnymalTarget(env_id, evaluation_config(base, forward_velocity))
 
 
@@ -113,10 +128,13 @@ def evaluate(
     video: bool = False,
     max_steps: int | None = None,
     policy: LoadedPolicy | None = None,
+    condition: str = DEFAULT_CONDITION,
 ) -> tuple[dict[str, Any], Evaluation]:
     """Evaluate a saved policy; writes ``metrics.json``, ``episode.png`` (and ``episode.mp4``) into ``out_dir``.
 
-    ``env_overrides``: EnvConfig fields. Returns the report written to ``metrics.json`` and the :class:`Evaluation`.
+    ``env_overrides``: EnvConfig fields, on top of evaluation ``condition``
+    (:mod:`margin_rl.train.analysis.conditions`). Returns the report written to ``metrics.json`` and the
+    :class:`Evaluation`.
 
     Raises:
         PolicyMismatchError: the policy does not fit the environment.
@@ -124,7 +142,7 @@ def evaluate(
     """
     policy_path = Path(policy_path)
     policy = policy or load_policy(policy_path)
-    target = evaluation_target(policy, env_id, env_overrides, forward_velocity)
+    target = evaluation_target(policy, env_id, env_overrides, forward_velocity, condition)
     out = Path(out_dir) if out_dir is not None else default_out_dir(policy_path)
     with torch_threads(1):  # see margin_rl.train.runs.torch_threads
         evaluation = run_episodes(policy, target, episodes, seed, warmup_s, render=video, max_steps=max_steps)
@@ -148,6 +166,7 @@ def evaluate(
         "video_message": video_message or None,
         "out_dir": str(out),
         "forward_velocity": forward_velocity,
+        "condition": condition,
         "warmup_s": warmup_s,
         "env_config": to_dict(target.config),
     }
@@ -171,6 +190,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=None,
         help=f"fixed command [m/s] (default {DEFAULT_FORWARD_VELOCITY})",
+    )
+    parser.add_argument(
+        "--condition",
+        choices=tuple(CONDITIONS),
+        default=DEFAULT_CONDITION,
+        help=f"evaluation world (default {DEFAULT_CONDITION}: no training randomisation; "
+        "margin_rl.train.analysis.conditions)",
     )
     parser.add_argument("--warmup-s", type=float, default=1.0, help="seconds left out of acceleration statistics")
     parser.add_argument("--max-steps", type=int, help="cut episodes after this many policy steps")
@@ -218,6 +244,7 @@ def main(argv: list[str] | None = None) -> int:
             out_dir=args.out,
             video=args.video,
             max_steps=args.max_steps,
+            condition=args.condition,
         )
     except (PolicyMismatchError, FileNotFoundError, ValueError, TypeError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -62,6 +62,7 @@ from margin_rl.train.config import (
     to_dict,
 )
 from margin_rl.train.environments import DEFAULT_ENV, AnymalTarget, anymal_id, check_margin_available, env_target
+from margin_rl.train.recipes import RECIPES, get_recipe, with_recipe
 from margin_rl.train.runs import (
     CONFIG_FILE,
     PROGRESS_FILE,
@@ -103,6 +104,9 @@ class TrainSpec:
     # Warm start: the network weights of this trained model (rsl-rl .pt checkpoint or final model, SB3 .zip) are the
     # run's first weights; steps, optimizer and learning-rate schedule start fresh. None: random initialisation.
     init_from: str | None = None
+    # The training recipe the run started from (margin_rl.train.recipes), a record only: the settings above are what
+    # the run uses. None: no recipe (options given one by one).
+    recipe: str | None = None
 
     def __post_init__(self) -> None:
         if self.env_config is None:
@@ -117,6 +121,8 @@ class TrainSpec:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.init_from is not None and not isinstance(self.init_from, str):
             raise TypeError(f"init_from must be None or a path (str), got {self.init_from!r}")
+        if self.recipe is not None:
+            get_recipe(self.recipe)  # an unknown name: the error listing the recipes
 
     @property
     def target(self) -> AnymalTarget:
@@ -158,6 +164,7 @@ class TrainSpec:
             "checkpoint_every": self.checkpoint_every,
             "device": self.device,
             "init_from": self.init_from,
+            "recipe": self.recipe,
             "env_config": to_dict(self.env_config),
             "ppo": to_dict(self.ppo),
         }
@@ -185,6 +192,7 @@ class TrainSpec:
             env_config=from_dict(EnvConfig, data["env_config"], "env_config"),
             ppo=from_dict(ppo_class, data["ppo"], "ppo"),
             init_from=data.get("init_from"),  # absent in runs recorded before warm starts existed
+            recipe=data.get("recipe"),  # absent in runs recorded before recipes existed
         )
 
 
@@ -439,6 +447,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--checkpoint-every", type=int, default=None, help=f"steps between checkpoints ({DEFAULT_CHECKPOINT_EVERY})"
     )
     parser.add_argument("--ppo-option", action="append", metavar="KEY=VALUE", help="PPO config field (repeatable)")
+    parser.add_argument(
+        "--recipe",
+        choices=tuple(RECIPES),
+        help="start from a training recipe (margin_rl.train.recipes): its environment options, --num-envs, "
+        "--total-steps and PPO options, each replaced by the option given here",
+    )
     parser.add_argument("--run-dir", type=Path, help="run directory (default: <runs-root>/<generated name>)")
     parser.add_argument("--runs-root", type=Path, default=Path("runs"), help="parent of generated run directories")
     parser.add_argument(
@@ -476,16 +490,24 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         return spec, args.resume, True
     env_id = args.env or DEFAULT_ENV
     backend = args.backend or DEFAULT_BACKEND
+    recipe = get_recipe(args.recipe) if args.recipe is not None else None
     run = {
         "seed": DEFAULT_SEED if args.seed is None else args.seed,
-        "num_envs": args.num_envs or DEFAULT_NUM_ENVS,
-        "total_steps": args.total_steps or DEFAULT_TOTAL_STEPS,
+        "num_envs": args.num_envs or (recipe.num_envs if recipe else DEFAULT_NUM_ENVS),
+        "total_steps": args.total_steps or (recipe.total_steps if recipe else DEFAULT_TOTAL_STEPS),
         "checkpoint_every": args.checkpoint_every or DEFAULT_CHECKPOINT_EVERY,
         "device": args.device or "cpu",
         "init_from": args.init_from,
+        "recipe": args.recipe,
     }
-    overrides = cli.with_training_defaults(env_id, cli.env_overrides(args))
-    spec = make_spec(env_id, backend, overrides, parse_assignments(args.ppo_option, "--ppo-option"), **run)
+    overrides = cli.env_overrides(args)
+    ppo_overrides = parse_assignments(args.ppo_option, "--ppo-option")
+    if recipe is not None:
+        overrides = with_recipe(recipe, overrides)
+        overrides.setdefault("margin_weight", recipe.margin_weight)
+        ppo_overrides = {**recipe.ppo_overrides(), **ppo_overrides}
+    overrides = cli.with_training_defaults(env_id, overrides)
+    spec = make_spec(env_id, backend, overrides, ppo_overrides, **run)
     if spec.init_from is not None:
         check_init_from(spec.init_from, spec.backend)
     run_dir = args.run_dir or args.runs_root / run_name(env_id, backend, spec.target.margin_weight, spec.seed)

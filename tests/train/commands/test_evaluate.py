@@ -120,3 +120,14 @@ def test_not_computed_reasons() -> None:
     assert set(reasons) == {"lin_acc_rms", "speed_mean"} and "first 1 s" in reasons["lin_acc_rms"]
     assert reasons["speed_mean"] == "no episode reported a finite value"
     assert not_computed(summarize([{"lin_acc_rms": 2.0}])) == {}
+
+
+def test_evaluation_condition_is_recorded_and_options_apply_on_top(rsl_run: Path) -> None:
+    out = rsl_run / "eval" / "slippery"
+    argv = [str(rsl_run / "final_model.pt"), "--episodes", "2", "--max-steps", "10", "--out", str(out)]
+    assert main([*argv, "--condition", "friction_0.4", "--env-option", "reward_params.alive_bonus=0.3"]) == 0
+    report = json.loads((out / "metrics.json").read_text())
+    assert report["condition"] == "friction_0.4" and report["env_config"]["randomization"]["friction"] == [0.4, 0.4]
+    assert report["env_config"]["reward_params"]["alive_bonus"] == 0.3
+    report, _ = evaluate(rsl_run / "final_model.pt", out_dir=out, **QUICK)
+    assert report["condition"] == "nominal" and report["env_config"]["randomization"]["friction"] is None

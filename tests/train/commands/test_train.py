@@ -131,10 +131,13 @@ def test_cli_defaults_are_the_shipped_experiment() -> None:
 
 
 def test_compare_cli_defaults_are_the_shipped_experiment() -> None:
-    from margin_rl.train.commands.compare import build_parser
+    from margin_rl.train.commands.compare import _settings_from_args, build_parser
     from margin_rl.train.commands.options import with_training_defaults
 
-    assert build_parser().parse_args([]).margin_weight == 0.2
+    settings = _settings_from_args(build_parser().parse_args([]))
+    assert settings.margin_weight == 0.2 and settings.num_envs == 128 and settings.recipe is None
+    robust = _settings_from_args(build_parser().parse_args(["--recipe", "robust", "--total-steps", "1000"]))
+    assert robust.recipe == "robust" and robust.num_envs == 512 and robust.total_steps == 1000
     assert "reward_params.alive_bonus=0.1" in build_parser().format_help()
     options = with_training_defaults("margin_rl/AnymalB-v1", {"margin": "none"}, margin_weight=False)
     assert options == {"reward_params": {"alive_bonus": 0.1}, "margin": "none"}  # the variants set their weights

@@ -1,0 +1,72 @@
+"""Training recipes: declared once, applied by ``train --recipe`` with the command line's options on top."""
+
+from __future__ import annotations
+
+import pytest
+
+from margin_rl.envs.config import CommandConfig
+from margin_rl.train.commands import train as train_module
+from margin_rl.train.recipes import RECIPES, TrainingRecipe, get_recipe, with_recipe
+
+
+def _spec(*argv: str) -> train_module.TrainSpec:
+    spec, _, _ = train_module.spec_from_args(train_module.build_parser().parse_args(list(argv)))
+    return spec
+
+
+def test_robust_recipe_sets_the_environment_size_and_steps() -> None:
+    spec = _spec("--recipe", "robust", "--margin-weight", "0", "--seed", "3")
+    config = spec.env_config
+    assert spec.recipe == "robust" and spec.num_envs == 512 and spec.total_steps == RECIPES["robust"].total_steps
+    assert config.command.forward_velocity == (0.2, 1.1) and config.margin_weight == 0.0 and spec.seed == 3
+    randomization = config.randomization
+    assert randomization.friction == (0.3, 1.25) and randomization.added_base_mass == (-5.0, 5.0)
+    assert randomization.push_interval_s == 8.0 and randomization.push_force * randomization.push_duration_s == 30.0
+    assert config.reward_params.alive_bonus == 0.1 and config.reward_params.knee_clearance == 5.0
+    assert spec.to_json()["recipe"] == "robust"
+    assert train_module.TrainSpec.from_json(spec.to_json()) == spec  # what --resume reads back
+
+
+def test_both_variants_differ_only_in_the_margin_weight() -> None:
+    baseline = _spec("--recipe", "robust", "--margin-weight", "0").env_config
+    margin = _spec("--recipe", "robust").env_config
+    assert margin.margin_weight == RECIPES["robust"].margin_weight > 0
+    assert baseline.replace(margin_weight=margin.margin_weight) == margin
+
+
+def test_options_given_replace_the_recipes() -> None:
+    spec = _spec(
+        "--recipe", "robust", "--num-envs", "64", "--total-steps", "1000",
+        "--env-option", "reward_params.knee_clearance=1", "--env-option", 'command={"forward_velocity": [0.5, 0.5]}',
+    )  # fmt: skip
+    assert spec.num_envs == 64 and spec.total_steps == 1000
+    params = spec.env_config.reward_params
+    assert params.knee_clearance == 1.0 and params.alive_bonus == 0.1  # one reward entry changed, the other kept
+    assert spec.env_config.command == CommandConfig(forward_velocity=(0.5, 0.5))
+    assert spec.env_config.randomization.friction == (0.3, 1.25)  # what was not given stays the recipe's
+
+
+def test_fixed_command_recipe_is_the_knee_term_experiment() -> None:
+    recipe = _spec("--recipe", "fixed_command", "--margin-weight", "0.2")
+    by_hand = _spec("--num-envs", "128", "--total-steps", "5000000", "--env-option", "reward_params.knee_clearance=5")
+    assert recipe.env_config == by_hand.env_config and recipe.num_envs == 128 and recipe.total_steps == 5_000_000
+
+
+def test_recipes_are_not_shared_mutable_state() -> None:
+    options = with_recipe(get_recipe("robust"), {"reward_params": {"knee_clearance": 0.0}})
+    options["reward_params"]["alive_bonus"] = 9.0
+    assert get_recipe("robust").env_options["reward_params"] == {"alive_bonus": 0.1, "knee_clearance": 5.0}
+
+
+def test_bad_recipes_are_clear_errors(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(ValueError, match=r"unknown training recipe 'fast'.*robust"):
+        get_recipe("fast")
+    with pytest.raises(SystemExit):
+        train_module.build_parser().parse_args(["--recipe", "fast"])
+    assert "fixed_command" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="num_envs must be an int >= 1"):
+        TrainingRecipe("x", "", {}, num_envs=0, total_steps=1, margin_weight=0.2)
+    with pytest.raises(ValueError, match="margin variant's weight"):
+        TrainingRecipe("x", "", {}, num_envs=1, total_steps=1, margin_weight=0.0)
+    with pytest.raises(ValueError, match="unknown training recipe"):
+        train_module.TrainSpec(recipe="fast")

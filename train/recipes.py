@@ -1,0 +1,123 @@
+"""Training recipes: the named settings a comparison trains both variants with, declared once.
+
+A recipe is everything of a run except its margin weight and seed: environment options (EnvConfig fields),
+parallel environments, steps and PPO options. The comparison of seed 000 §V-C trains "without margin" (weight 0)
+and "with margin" (the recipe's ``margin_weight``) with the same recipe, so every added term and every
+randomisation applies to both variants.
+
+``train --recipe NAME`` and ``compare --recipe NAME`` start from a recipe; any option given on the command line
+(``--num-envs``, ``--total-steps``, ``--env-option``, ``--ppo-option``, ``--margin-weight``) replaces the recipe's.
+The recipe's name is written into the run's ``config.json``.
+
+* ``fixed_command`` — what the v1/knee-term bundles were trained with: the paper's single command 0.75 m/s,
+  no randomisation, 128 environments, 5M steps, the alive bonus 0.1 and the knee-clearance term 5 (BENCHMARKS
+  "The comparison with and without the margin").
+* ``robust`` — the field's robustness measures for a flat-ground locomotion baseline (legged_gym's flat ANYmal
+  task is the model): forward commands 0.2–1.1 m/s (the evaluation's 0.5, 0.75 and 1.0 m/s inside, away from
+  the edges), floor friction 0.3–1.25 per episode, base mass ±5 kg (±30 % of ANYmal B's MJCF base of 16.8 kg,
+  ±26 % of C's 19.2 kg; the evaluation's ±20 % inside), random horizontal pushes of 150 N for 0.2 s (30 N s,
+  about 0.85 m/s on ANYmal B) every 8 s on average, the usual reset noise, and 512 environments (a 12,288-step
+  batch, and a third less update time per step than 128 on this CPU: BENCHMARKS "Training throughput").
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from margin_rl.envs.config import CommandConfig, RandomizationConfig
+
+
+@dataclass(frozen=True)
+class TrainingRecipe:
+    """One recipe (see the module docstring). ``env_options`` are EnvConfig field overrides (the configs
+    themselves, or mappings for ``reward_params``), ``ppo_options`` PPO config field overrides."""
+
+    name: str
+    summary: str
+    env_options: Mapping[str, Any]
+    num_envs: int
+    total_steps: int
+    margin_weight: float  # the margin variant's weight; the baseline's is 0
+    ppo_options: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("num_envs", "total_steps"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ValueError(f"TrainingRecipe {self.name!r}: {name} must be an int >= 1, got {value!r}")
+        if not self.margin_weight > 0:
+            raise ValueError(
+                f"TrainingRecipe {self.name!r}: margin_weight is the margin variant's weight, > 0; "
+                f"got {self.margin_weight!r}"
+            )
+
+    def env_overrides(self) -> dict[str, Any]:
+        """A fresh copy of the environment options (callers may add to it)."""
+        return copy.deepcopy(dict(self.env_options))
+
+    def ppo_overrides(self) -> dict[str, Any]:
+        """A fresh copy of the PPO options."""
+        return copy.deepcopy(dict(self.ppo_options))
+
+
+_KNEE_TERM = {"alive_bonus": 0.1, "knee_clearance": 5.0}
+
+RECIPES: dict[str, TrainingRecipe] = {
+    recipe.name: recipe
+    for recipe in (
+        TrainingRecipe(
+            name="fixed_command",
+            summary="the paper's one command 0.75 m/s, no randomisation, 128 envs, 5M steps, alive 0.1, knee term 5",
+            env_options={"reward_params": dict(_KNEE_TERM)},
+            num_envs=128,
+            total_steps=5_000_000,
+            margin_weight=0.2,
+        ),
+        TrainingRecipe(
+            name="robust",
+            summary="commands 0.2-1.1 m/s, friction 0.3-1.25, base mass +-5 kg, pushes 30 N s every 8 s, 512 envs",
+            env_options={
+                "reward_params": dict(_KNEE_TERM),
+                "command": CommandConfig(forward_velocity=(0.2, 1.1)),
+                "randomization": RandomizationConfig(
+                    friction=(0.3, 1.25),
+                    added_base_mass=(-5.0, 5.0),
+                    push_interval_s=8.0,
+                    push_force=150.0,
+                    push_duration_s=0.2,
+                ),
+            },
+            num_envs=512,
+            total_steps=10_000_000,
+            margin_weight=0.2,
+        ),
+    )
+}
+"""The recipes by name (see the module docstring)."""
+
+
+def get_recipe(name: str) -> TrainingRecipe:
+    """The recipe ``name``.
+
+    Raises:
+        ValueError: no such recipe (the message lists them).
+    """
+    if name not in RECIPES:
+        listed = "; ".join(f"{key}: {recipe.summary}" for key, recipe in RECIPES.items())
+        raise ValueError(f"unknown training recipe {name!r}; the recipes are {listed}")
+    return RECIPES[name]
+
+
+def with_recipe(recipe: TrainingRecipe, env_overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """The recipe's environment options with ``env_overrides`` on top: a field given replaces the recipe's, and a
+    ``reward_params`` mapping given changes only the keys it names."""
+    merged = recipe.env_overrides()
+    for key, value in env_overrides.items():
+        if key == "reward_params" and isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+            merged[key] = {**merged[key], **value}
+        else:
+            merged[key] = value
+    return merged

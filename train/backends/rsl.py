@@ -50,6 +50,7 @@ from margin_rl.train.runs import (
     checkpoint_path,
     quiet_stdout,
     torchscript_export,
+    with_torch_threads,
 )
 
 CHECKPOINT_FORMAT = "margin_rl/rsl-checkpoint-1"
@@ -163,9 +164,21 @@ def _load_checkpoint(path: Path, not_ours: str) -> tuple[dict[str, Any], dict[st
 class CheckpointingRunner(OnPolicyRunner):
     """rsl-rl's OnPolicyRunner writing atomic, self-describing checkpoints (see the module docstring)."""
 
-    def __init__(self, env: RslVecEnv, train_cfg: dict[str, Any], run_dir: Path, device: str, hooks: RunHooks) -> None:
+    def __init__(
+        self,
+        env: RslVecEnv,
+        train_cfg: dict[str, Any],
+        run_dir: Path,
+        device: str,
+        hooks: RunHooks,
+        update_threads: int | None = None,
+    ) -> None:
+        """``update_threads``: torch threads inside PPO's update (:func:`~margin_rl.train.runs.with_torch_threads`);
+        None: the caller's setting throughout."""
         with quiet_stdout(not hooks.verbose):
             super().__init__(env, copy.deepcopy(train_cfg), log_dir=str(run_dir / TENSORBOARD_DIR), device=device)
+        if update_threads is not None:
+            self.alg.update = with_torch_threads(self.alg.update, update_threads)
         self.adapter = env
         self.run_dir = run_dir
         self.hooks = hooks
@@ -290,13 +303,15 @@ def train_rsl(
     hooks: RunHooks,
     final_model: Path,
     init_from: str | Path | None = None,
+    update_threads: int | None = None,
 ) -> tuple[int, bool, Path | None]:
     """Run (or continue) rsl-rl PPO up to ``total_iterations``; returns (env steps, stopped, TorchScript path).
 
     The caller seeds torch before calling (the networks are initialised here). ``init_from``: a trained model whose
     weights a new run starts from (:meth:`CheckpointingRunner.warm_start`); ignored when continuing a checkpoint.
+    ``update_threads``: torch threads inside the PPO update (None: the caller's setting throughout).
     """
-    runner = CheckpointingRunner(env, train_cfg, run_dir, device, hooks)
+    runner = CheckpointingRunner(env, train_cfg, run_dir, device, hooks, update_threads)
     if checkpoint is not None:
         runner.restore(checkpoint)
     elif init_from is not None:

@@ -46,6 +46,7 @@ import torch
 from tqdm import tqdm
 
 from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.physics import usable_cores
 from margin_rl.provenance import sha256_file
 from margin_rl.train.backends.rsl import rsl_vec_env, train_rsl
 from margin_rl.train.backends.sb3 import sb3_vec_env, train_sb3
@@ -334,12 +335,15 @@ def train(
     on_checkpoint: Any = None,
     command: list[str] | None = None,
     threads: int | None = 1,
+    update_threads: int | None = None,
 ) -> TrainResult:
     """Train (or, with ``resume``, continue from the latest checkpoint of ``run_dir``) one PPO run.
 
     SIGINT/SIGTERM (or ``stop.request()``) stop at the next safe point with a checkpoint; ``on_checkpoint(path,
     steps)`` is called after every checkpoint. ``threads``: torch intra-op threads while training (see
-    :func:`margin_rl.train.runs.torch_threads`; None keeps torch's setting). Raises FileExistsError when
+    :func:`margin_rl.train.runs.torch_threads`; None keeps torch's setting); ``update_threads``: torch threads
+    inside rsl-rl's PPO update (None: one per core this process may run on, :func:`usable_cores`; the SB3 backend
+    keeps ``threads`` throughout). Threads change the speed, not what PPO computes. Raises FileExistsError when
     ``run_dir`` already holds checkpoints and ``resume`` is False, ValueError when the environment cannot be built
     (:func:`check_environment`).
     """
@@ -369,7 +373,7 @@ def train(
     t0 = time.perf_counter()
     try:
         with graceful_stop(stop, verbose=True), torch_threads(threads):
-            steps, stopped, torchscript = _run_backend(spec, run_dir, checkpoint, hooks)
+            steps, stopped, torchscript = _run_backend(spec, run_dir, checkpoint, hooks, update_threads)
     finally:
         bar.close()
     elapsed = time.perf_counter() - t0
@@ -390,7 +394,9 @@ def train(
     return TrainResult(run_dir, steps, not stopped, stopped, latest[0], final, torchscript, steps - start, elapsed)
 
 
-def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks: RunHooks) -> tuple[int, bool, Any]:
+def _run_backend(
+    spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks: RunHooks, update_threads: int | None = None
+) -> tuple[int, bool, Any]:
     """Seed, build the backend's vector environment over the spec's environment, and hand over to the backend."""
     torch.manual_seed(spec.seed)
     np.random.seed(spec.seed % 2**32)
@@ -399,7 +405,16 @@ def _run_backend(spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks:
         env = rsl_vec_env(spec.target, spec.num_envs, spec.seed)
         cfg = spec.backend_config(run_dir.name)
         return train_rsl(
-            env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final, init_from=spec.init_from
+            env,
+            cfg,
+            run_dir,
+            spec.device,
+            spec.total_iterations,
+            checkpoint,
+            hooks,
+            final,
+            init_from=spec.init_from,
+            update_threads=usable_cores() if update_threads is None else update_threads,
         )
     venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed)
     total = spec.total_iterations * spec.steps_per_iteration
@@ -471,6 +486,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--torch-threads", type=int, default=1, help="torch intra-op threads (default 1: leaves the cores to MuJoCo)"
     )
+    parser.add_argument(
+        "--update-threads",
+        type=int,
+        default=None,
+        help="torch threads inside rsl-rl's PPO update (default: the cores this process may run on)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="also print the backend's own logs")
     return parser
@@ -535,6 +556,7 @@ def main(argv: list[str] | None = None) -> int:
             stop=stop,
             command=command,
             threads=args.torch_threads,
+            update_threads=args.update_threads,
         )
     except FileExistsError as exc:
         parser.error(str(exc))

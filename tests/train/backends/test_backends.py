@@ -168,3 +168,27 @@ def test_factories_name_what_is_wrong(factory, toy_weights: str) -> None:
         factory("margin_rl/SLIPHopper-v0", 2)  # the whole message: tests/train/test_other_environments.py
     with pytest.raises(ValueError, match="unknown environment id"):
         factory("margin_rl/NoSuchRobot-v0", 2)
+
+
+def test_update_threads_hold_inside_the_update_only(toy_weights: str, tmp_path, monkeypatch) -> None:
+    from rsl_rl.algorithms import PPO
+
+    from margin_rl.train.backends.rsl import CheckpointingRunner
+    from margin_rl.train.runs import RunHooks, torch_threads
+
+    seen: list[int] = []
+    update = PPO.update
+
+    def spy(self, *args, **kwargs):
+        seen.append(torch.get_num_threads())
+        return update(self, *args, **kwargs)
+
+    monkeypatch.setattr(PPO, "update", spy)
+    env = make_rsl_env("margin_rl/AnymalB-v1", 4, seed=0, margin_weights=toy_weights, **SHORT)
+    hooks = RunHooks(lambda: False, lambda steps, mean_return: None, lambda path, steps: None)
+    cfg = RslPPOConfig(num_steps_per_env=4).runner_cfg(False, 50)
+    with torch_threads(1):
+        CheckpointingRunner(env, cfg, tmp_path / "a", "cpu", hooks, update_threads=2).learn(2)
+        assert seen == [2, 2] and torch.get_num_threads() == 1  # two threads in the update, the caller's one after
+        CheckpointingRunner(env, cfg, tmp_path / "b", "cpu", hooks).learn(1)
+        assert seen[-1] == 1  # None: the caller's setting throughout

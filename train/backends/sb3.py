@@ -58,6 +58,7 @@ from margin_rl.train.runs import (
     TORCHSCRIPT_FILE,
     RunHooks,
     checkpoint_path,
+    torch_threads,
     torchscript_export,
 )
 
@@ -257,9 +258,24 @@ class TrainingCallback(BaseCallback):
         self._clock, self._clock_steps = now, steps
 
 
-def make_model(venv: VecEnv, ppo: Sb3PPOConfig, seed: int, device: str) -> PPO:
+class ThreadedPPO(PPO):
+    """SB3's PPO with its update (``train``) run on ``update_threads`` torch threads (:func:`torch_threads`; None:
+    the caller's setting), collection on the caller's. The saved zip is an ordinary PPO's (``PPO.load`` reads it);
+    the thread count is a setting of this process, not saved."""
+
+    update_threads: int | None = None
+
+    def train(self) -> None:
+        with torch_threads(self.update_threads):
+            super().train()
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "update_threads"]
+
+
+def make_model(venv: VecEnv, ppo: Sb3PPOConfig, seed: int, device: str) -> ThreadedPPO:
     """A new SB3 PPO on the vector environment."""
-    return PPO("MlpPolicy", venv, seed=seed, device=device, verbose=0, **ppo.ppo_kwargs(venv.num_envs))
+    return ThreadedPPO("MlpPolicy", venv, seed=seed, device=device, verbose=0, **ppo.ppo_kwargs(venv.num_envs))
 
 
 class _DeterministicActor(torch.nn.Module):
@@ -331,19 +347,21 @@ def train_sb3(
     hooks: RunHooks,
     final_model: Path,
     init_from: str | Path | None = None,
+    update_threads: int | None = None,
 ) -> tuple[int, bool, Path | None]:
     """Run (or continue) SB3 PPO up to ``total_steps``; returns (env steps, stopped, TorchScript path).
 
     ``init_from``: a trained SB3 model whose weights a new run starts from (:func:`warm_start`); ignored when
-    continuing a checkpoint.
+    continuing a checkpoint. ``update_threads``: torch threads inside PPO's update (:class:`ThreadedPPO`).
     """
     if checkpoint is not None:
         warn_unpickling(checkpoint)
-        model = PPO.load(checkpoint, env=venv, device=device)
+        model = ThreadedPPO.load(checkpoint, env=venv, device=device)
     else:
         model = make_model(venv, ppo, seed, device)
         if init_from is not None:
             warm_start(model, Path(init_from))
+    model.update_threads = update_threads
     formats = ["tensorboard", "stdout"] if hooks.verbose else ["tensorboard"]
     model.set_logger(configure(str(run_dir / TENSORBOARD_DIR), formats))
     callback = TrainingCallback(venv, run_dir, checkpoint_every, hooks)

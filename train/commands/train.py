@@ -342,8 +342,8 @@ def train(
     SIGINT/SIGTERM (or ``stop.request()``) stop at the next safe point with a checkpoint; ``on_checkpoint(path,
     steps)`` is called after every checkpoint. ``threads``: torch intra-op threads while training (see
     :func:`margin_rl.train.runs.torch_threads`; None keeps torch's setting); ``update_threads``: torch threads
-    inside rsl-rl's PPO update (None: one per core this process may run on, :func:`usable_cores`; the SB3 backend
-    keeps ``threads`` throughout). Threads change the speed, not what PPO computes. Raises FileExistsError when
+    inside the PPO update of either backend (None: one per core this process may run on, :func:`usable_cores`).
+    Threads change the speed, not what PPO computes. Raises FileExistsError when
     ``run_dir`` already holds checkpoints and ``resume`` is False, ValueError when the environment cannot be built
     (:func:`check_environment`).
     """
@@ -430,6 +430,7 @@ def _run_backend(
         hooks,
         final,
         init_from=spec.init_from,
+        update_threads=usable_cores() if update_threads is None else update_threads,
     )
 
 
@@ -490,7 +491,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--update-threads",
         type=int,
         default=None,
-        help="torch threads inside rsl-rl's PPO update (default: the cores this process may run on)",
+        help="torch threads inside the PPO update (default: the cores this process may run on)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="also print the backend's own logs")

@@ -192,3 +192,24 @@ def test_update_threads_hold_inside_the_update_only(toy_weights: str, tmp_path, 
         assert seen == [2, 2] and torch.get_num_threads() == 1  # two threads in the update, the caller's one after
         CheckpointingRunner(env, cfg, tmp_path / "b", "cpu", hooks).learn(1)
         assert seen[-1] == 1  # None: the caller's setting throughout
+
+
+def test_sb3_update_threads_hold_inside_the_update_and_are_not_saved(toy_weights: str, tmp_path, monkeypatch) -> None:
+    from stable_baselines3 import PPO
+
+    from margin_rl.train.backends.sb3 import ThreadedPPO, make_model
+    from margin_rl.train.config import Sb3PPOConfig
+    from margin_rl.train.runs import torch_threads
+
+    seen: list[int] = []
+    update = PPO.train
+    monkeypatch.setattr(PPO, "train", lambda self: (seen.append(torch.get_num_threads()), update(self))[1])
+    venv = make_sb3_env("margin_rl/AnymalB-v1", 4, seed=0, margin_weights=toy_weights, **SHORT)
+    model = make_model(venv, Sb3PPOConfig(n_steps=8), seed=0, device="cpu")
+    model.update_threads = 2
+    with torch_threads(1):
+        model.learn(32)
+        assert seen and set(seen) == {2} and torch.get_num_threads() == 1
+    model.save(tmp_path / "model.zip")
+    assert PPO.load(tmp_path / "model.zip", device="cpu").num_timesteps == model.num_timesteps  # an ordinary PPO zip
+    assert ThreadedPPO.load(tmp_path / "model.zip", device="cpu").update_threads is None  # a setting, not saved

@@ -540,6 +540,9 @@ def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns 0 when the run finished, 128 + signal number when it was stopped."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    for name in ("torch_threads", "update_threads"):
+        if getattr(args, name) is not None and getattr(args, name) < 1:
+            parser.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     try:
         spec, run_dir, resume = spec_from_args(args)
         check_environment(spec)

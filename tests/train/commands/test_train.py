@@ -141,3 +141,10 @@ def test_compare_cli_defaults_are_the_shipped_experiment() -> None:
     assert "reward_params.alive_bonus=0.1" in build_parser().format_help()
     options = with_training_defaults("margin_rl/AnymalB-v1", {"margin": "none"}, margin_weight=False)
     assert options == {"reward_params": {"alive_bonus": 0.1}, "margin": "none"}  # the variants set their weights
+
+
+def test_thread_counts_below_one_are_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    for option in ("--update-threads", "--torch-threads"):
+        with pytest.raises(SystemExit):
+            train_module.main([option, "0"])
+        assert f"{option} must be >= 1, got 0" in capsys.readouterr().err

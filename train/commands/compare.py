@@ -28,6 +28,11 @@ measured for the baseline too. Outputs in ``<out>``:
   that inverts it and a bootstrap interval (``"statistics"`` in the JSON, a second table in the Markdown;
   :mod:`margin_rl.train.analysis.significance`).
 
+``--eval-commands 0.5 1.0 --eval-conditions friction_0.4 mass_-20 mass_+20`` also evaluates every policy in each
+(condition, command) cell of the grid (conditions of :mod:`margin_rl.train.analysis.conditions`; the main cell is
+the nominal condition at ``--forward-velocity``), with the same episodes and seeds: ``"grid"`` in the JSON (each
+cell's variants and statistics, as for the main cell) and a table per cell and metric in the Markdown.
+
 Push recovery of the same policies: :mod:`margin_rl.train.commands.push_recovery` (``--bundled NAME`` or ``--variant``).
 
 ``--bundle DIR`` then copies the runs' TorchScript actors and configs, and the learned-margin weights they were
@@ -45,6 +50,7 @@ package's current margin weights, ...); the card's table then need not be reprod
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import platform
 import sys
@@ -54,6 +60,7 @@ from pathlib import Path
 from typing import Any
 
 from margin_rl.provenance import git_commit
+from margin_rl.train.analysis.conditions import CONDITIONS, DEFAULT_CONDITION, check_condition
 from margin_rl.train.analysis.media import plot_accelerations
 from margin_rl.train.analysis.significance import RESAMPLES, compare_variants, difference_table
 from margin_rl.train.artifacts.bundle import load_bundle, write_bundle
@@ -97,12 +104,28 @@ class CompareSettings:
     warmup_s: float = 1.0
     device: str = "cpu"
     recipe: str | None = None  # the training recipe (margin_rl.train.recipes) the runs are trained with, if any
+    # More evaluation cells: every (condition, command) of ("nominal", *grid_conditions) x (forward_velocity,
+    # *grid_commands) other than the main one (nominal, forward_velocity); empty: the main cell only.
+    grid_commands: tuple[float, ...] = ()  # [m/s]
+    grid_conditions: tuple[str, ...] = ()  # names of margin_rl.train.analysis.conditions
 
     def __post_init__(self) -> None:
         if self.margin_weight <= 0:
             raise ValueError(f"--margin-weight must be > 0 (the baseline uses 0), got {self.margin_weight}")
         if not self.seeds:
             raise ValueError("at least one seed is needed")
+        for command in self.grid_commands:
+            if not (isinstance(command, (int, float)) and math.isfinite(command)):
+                raise ValueError(f"--eval-commands must be finite velocities [m/s], got {command!r}")
+        for condition in self.grid_conditions:
+            check_condition(condition)
+
+    def grid_cells(self) -> list[tuple[str, float]]:
+        """The (condition, command) cells evaluated besides the main one, conditions outermost, in given order."""
+        conditions = list(dict.fromkeys((DEFAULT_CONDITION, *self.grid_conditions)))
+        commands = list(dict.fromkeys((float(self.forward_velocity), *map(float, self.grid_commands))))
+        main = (DEFAULT_CONDITION, float(self.forward_velocity))
+        return [(c, v) for c in conditions for v in commands if (c, v) != main]
 
     def variants(self) -> dict[str, float]:
         """Variant name -> margin weight."""
@@ -167,28 +190,66 @@ def evaluate_variants(
     ``env_options``: the options the runs were trained with (recorded); ``eval_env_overrides``: EnvConfig fields
     changed for the evaluation only (a bundle's own learned-margin weights). With both variants, the report's
     ``"statistics"`` holds, per table metric, "with margin" against "without margin" over the training seeds
-    (:func:`margin_rl.train.analysis.significance.compare_seeds` as a dict).
+    (:func:`margin_rl.train.analysis.significance.compare_seeds` as a dict). The settings' grid cells
+    (:meth:`CompareSettings.grid_cells`) are evaluated the same way into ``<run>/eval_grid/<cell>`` (or
+    ``<out>/eval_grid/<variant>__s<seed>/<cell>``), each with its variants and statistics in ``report["grid"]``.
     """
     out = Path(out)
     report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": dict(env_options or {})}
     if eval_env_overrides:
         report["eval_env_overrides"] = dict(eval_env_overrides)
-    report["variants"] = {}
+    main_cell = (DEFAULT_CONDITION, settings.forward_velocity)
+    report["variants"], examples = _evaluate_cell(variants, settings, out, eval_env_overrides, main_cell)
+    report.update(_variant_statistics(report["variants"]))
+    if settings.grid_cells():
+        report["grid"] = []
+        for condition, command in settings.grid_cells():
+            cell, _ = _evaluate_cell(variants, settings, out, eval_env_overrides, (condition, command))
+            report["grid"].append(
+                {"condition": condition, "forward_velocity": command, "variants": cell, **_variant_statistics(cell)}
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    report["plot"] = plot_accelerations(examples, out / "compare.png", settings).name
+    report["table"] = write_markdown(report, out / "compare.md").name
+    write_json(out / "compare.json", report)
+    return report
+
+
+def cell_name(condition: str, forward_velocity: float) -> str:
+    """Folder of one grid cell's evaluation: ``<condition>__v<command>``."""
+    return f"{condition}__v{forward_velocity:g}"
+
+
+def _evaluate_cell(
+    variants: dict[str, tuple[float, list[tuple[int, Path]]]],
+    settings: CompareSettings,
+    out: Path,
+    eval_env_overrides: dict[str, Any] | None,
+    cell: tuple[str, float],
+) -> tuple[dict[str, Any], dict[str, Evaluation]]:
+    """Every variant's policies in one (condition, command) cell: the variants' report and a first episode each."""
+    condition, command = cell
+    main = cell == (DEFAULT_CONDITION, settings.forward_velocity)
+    report: dict[str, Any] = {}
     examples: dict[str, Evaluation] = {}
     for name, (weight, policies) in variants.items():
         runs = []
         for seed, policy in policies:
             config = find_run_config(policy, levels=1)
             in_run = config is not None and (config.parent / PROGRESS_FILE).is_file()
-            eval_dir = config.parent / "eval" if in_run else out / "eval" / f"{name.replace(' ', '_')}__s{seed}"
+            folder = "eval" if main else "eval_grid"
+            eval_dir = config.parent / folder if in_run else out / folder / f"{name.replace(' ', '_')}__s{seed}"
+            if not main:
+                eval_dir = eval_dir / cell_name(condition, command)
             metrics, evaluation = evaluate(
                 policy,
                 env_overrides=eval_env_overrides,
                 episodes=settings.eval_episodes,
                 seed=settings.eval_seed,
-                forward_velocity=settings.forward_velocity,
+                forward_velocity=command,
                 warmup_s=settings.warmup_s,
                 out_dir=eval_dir,
+                condition=condition,
             )
             examples.setdefault(name, evaluation)
             summary = {k: v["mean"] for k, v in metrics["summary"].items()}
@@ -197,25 +258,28 @@ def evaluate_variants(
             if metrics.get("not_computed"):  # null in "metrics": say why (present only then)
                 runs[-1]["not_computed"] = metrics["not_computed"]
         table = {key: mean_std([r["metrics"][key] for r in runs]) for key in SUMMARY_METRICS}
-        report["variants"][name] = {
+        report[name] = {
             "margin_weight": weight,
             "runs": runs,
             "mean": {k: v[0] for k, v in table.items()},
             "std": {k: v[1] for k, v in table.items()},
         }
-    if {"without margin", "with margin"} <= set(report["variants"]):
-        differences = compare_variants(report["variants"], "without margin", "with margin")
-        report["statistics"] = {metric: asdict(difference) for metric, difference in differences.items()}
-    out.mkdir(parents=True, exist_ok=True)
-    report["plot"] = plot_accelerations(examples, out / "compare.png", settings).name
-    report["table"] = write_markdown(report, out / "compare.md").name
-    write_json(out / "compare.json", report)
-    return report
+    return report, examples
+
+
+def _variant_statistics(variants: dict[str, Any]) -> dict[str, Any]:
+    """``{"statistics": ...}`` (with margin against without, per metric) when both variants are there, else {}."""
+    if not {"without margin", "with margin"} <= set(variants):
+        return {}
+    differences = compare_variants(variants, "without margin", "with margin")
+    return {"statistics": {metric: asdict(difference) for metric, difference in differences.items()}}
 
 
 def _settings_json(settings: CompareSettings) -> dict[str, Any]:
     data = asdict(settings)
     data["seeds"] = list(settings.seeds)
+    for key in ("grid_commands", "grid_conditions"):
+        data[key] = list(data[key])
     return data
 
 
@@ -253,9 +317,53 @@ def write_markdown(report: dict[str, Any], path: Path) -> Path:
             "",
             *difference_table(rows, difference_header="difference (with − without)"),
         ]
+    if report.get("grid"):
+        lines += ["", *grid_table(report)]
     lines += ["", f"![base acceleration]({report['plot']})", ""]
     path.write_text("\n".join(lines))
     return path
+
+
+GRID_METRICS: tuple[tuple[str, str], ...] = (
+    ("fell", ".3f"),
+    ("velocity_error_mean", ".3f"),
+    ("lin_acc_rms", ".2f"),
+    ("ang_acc_rms", ".1f"),
+)
+"""Metrics of the grid table (key, format)."""
+
+
+def grid_table(report: dict[str, Any]) -> list[str]:
+    """Markdown lines: per evaluation cell (the main one first) and metric, both variants' mean ± std over training
+    seeds, the difference with − without and Welch's p."""
+    s = report["settings"]
+    cells = [
+        {"condition": DEFAULT_CONDITION, "forward_velocity": s["forward_velocity"], **report},
+        *report["grid"],
+    ]
+    lines = [
+        "Across evaluation conditions (margin_rl.train.analysis.conditions) and commands, the same policies, "
+        "episodes and seeds: mean ± std over training seeds; difference with − without, Welch's p over seeds.",
+        "",
+        "| condition | command [m/s] | metric | without margin | with margin | difference | p (Welch) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for cell in cells:
+        for metric, fmt in GRID_METRICS:
+            values = []
+            for name in ("without margin", "with margin"):
+                variant = cell["variants"].get(name)
+                mean, std = (variant["mean"].get(metric), variant["std"].get(metric)) if variant else (None, None)
+                values.append("–" if mean is None else f"{mean:{fmt}} ± {std:{fmt}}")
+            difference = cell.get("statistics", {}).get(metric, {})
+            delta = difference.get("difference")
+            p_value = difference.get("p_value")
+            lines.append(
+                f"| {cell['condition']} | {cell['forward_velocity']:g} | {SUMMARY_METRICS.get(metric, metric)} | "
+                f"{values[0]} | {values[1]} | {'–' if delta is None else f'{delta:+{fmt[1:]}}'} | "
+                f"{'–' if p_value is None else f'{p_value:.2g}'} |"
+            )
+    return lines
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -286,6 +394,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--eval-seed", type=int, help=f"seed of the evaluation episodes (default {d.eval_seed})")
     parser.add_argument("--forward-velocity", type=float, help=f"command [m/s] (default {d.forward_velocity:g})")
     parser.add_argument("--warmup-s", type=float, help=f"seconds left out of accelerations (default {d.warmup_s:g})")
+    parser.add_argument(
+        "--eval-commands",
+        type=float,
+        nargs="+",
+        help="also evaluate at these commands [m/s] (a grid with --eval-conditions; see CompareSettings)",
+    )
+    parser.add_argument(
+        "--eval-conditions",
+        nargs="+",
+        choices=[name for name in CONDITIONS if name != DEFAULT_CONDITION],
+        help="also evaluate in these conditions (margin_rl.train.analysis.conditions), at every command",
+    )
     parser.add_argument("--device", default=d.device)
     parser.add_argument("--out", type=Path, help="output folder (default runs/compare__<env>__<backend>)")
     parser.add_argument(
@@ -305,7 +425,12 @@ _EVAL_OPTIONS = ("eval_episodes", "eval_seed", "forward_velocity", "warmup_s")
 
 
 def _eval_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    return {k: getattr(args, k) for k in _EVAL_OPTIONS if getattr(args, k) is not None}
+    options = {k: getattr(args, k) for k in _EVAL_OPTIONS if getattr(args, k) is not None}
+    if args.eval_commands is not None:
+        options["grid_commands"] = tuple(args.eval_commands)
+    if args.eval_conditions is not None:
+        options["grid_conditions"] = tuple(args.eval_conditions)
+    return options
 
 
 def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
@@ -345,6 +470,9 @@ def run_bundled(
     bundle = load_bundle(name)
     stored = dict(bundle.card["settings"])
     stored["seeds"] = tuple(stored["seeds"])
+    for key in ("grid_commands", "grid_conditions"):  # JSON lists; absent in cards written before grids existed
+        if key in stored:
+            stored[key] = tuple(stored[key])
     settings = CompareSettings(**{**stored, **dict(eval_overrides or {})})
     overrides = {**bundle.env_overrides(), **dict(env_overrides or {})}
     report = evaluate_variants(bundle.variants(), settings, out, bundle.card.get("env_options"), overrides)

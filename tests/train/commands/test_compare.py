@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from margin_rl.train.commands.compare import main
+from margin_rl.train.commands.evaluate import evaluate
 from margin_rl.train.metrics import SUMMARY_METRICS
 
 
@@ -30,9 +31,30 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
     markdown = (out / "compare.md").read_text()
     assert "| without margin | 0 |" in markdown and "| with margin | 2 |" in markdown and "compare.png" in markdown
     assert (out / "compare.png").stat().st_size > 10_000
-    # A second call reuses the finished runs instead of training again.
-    assert main(args) == 0
+    # A second call reuses the finished runs instead of training again; with a grid of commands and conditions.
+    assert main([*args, "--eval-commands", "1.0", "--eval-conditions", "friction_0.4"]) == 0
     assert len(list((out / "runs").glob("*/checkpoints/*.pt"))) == 2
+    grid_report = json.loads((out / "compare.json").read_text())
+    assert grid_report["variants"] == report["variants"]  # the main cell does not depend on the grid
+    cells = [(cell["condition"], cell["forward_velocity"]) for cell in grid_report["grid"]]
+    assert cells == [("nominal", 1.0), ("friction_0.4", 0.75), ("friction_0.4", 1.0)]
+    for cell in grid_report["grid"]:
+        assert set(cell["variants"]) == {"without margin", "with margin"} and "fell" in cell["statistics"]
+    run = Path(grid_report["grid"][2]["variants"]["with margin"]["runs"][0]["run_dir"])
+    cell_metrics = json.loads((run / "eval_grid" / "friction_0.4__v1" / "metrics.json").read_text())
+    assert cell_metrics["condition"] == "friction_0.4" and cell_metrics["forward_velocity"] == 1.0
+    assert cell_metrics["env_config"]["randomization"]["friction"] == [0.4, 0.4]
+    # the same cell evaluated directly gives the same numbers
+    direct, _ = evaluate(
+        run / "final_model.pt", episodes=2, seed=1000, forward_velocity=1.0, warmup_s=0.1,
+        condition="friction_0.4", out_dir=tmp_path / "direct",
+    )  # fmt: skip
+    assert grid_report["grid"][2]["variants"]["with margin"]["runs"][0]["metrics"]["return"] == pytest.approx(
+        direct["summary"]["return"]["mean"]
+    )
+    grid_markdown = (out / "compare.md").read_text()
+    assert "| friction_0.4 | 1 | falls [fraction of episodes] |" in grid_markdown
+    assert grid_markdown.count("| nominal | 0.75 |") == 4  # the main cell first, one row per grid metric
 
 
 def test_bundle_round_trip_evaluates_like_the_runs(tmp_path: Path, toy_weights: str) -> None:

@@ -31,7 +31,11 @@ measured for the baseline too. Outputs in ``<out>``:
 ``--eval-commands 0.5 1.0 --eval-conditions friction_0.4 mass_-20 mass_+20`` also evaluates every policy in each
 (condition, command) cell of the grid (conditions of :mod:`margin_rl.train.analysis.conditions`; the main cell is
 the nominal condition at ``--forward-velocity``), with the same episodes and seeds: ``"grid"`` in the JSON (each
-cell's variants and statistics, as for the main cell) and a table per cell and metric in the Markdown.
+cell's variants and statistics, as for the main cell) and a table per cell and metric in the Markdown. A grid cell
+evaluated before for the same request (policy checksum, options, episodes, seeds: ``request.json``) is reused.
+
+``--runs RUN_DIR ...`` trains nothing and evaluates finished runs (margin weight 0 and one other weight, e.g. runs
+trained one by one with ``train``) exactly like its own.
 
 Push recovery of the same policies: :mod:`margin_rl.train.commands.push_recovery` (``--bundled NAME`` or ``--variant``).
 
@@ -50,16 +54,18 @@ package's current margin weights, ...); the card's table then need not be reprod
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import math
 import os
 import platform
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, is_dataclass
 from pathlib import Path
 from typing import Any
 
-from margin_rl.provenance import git_commit
+from margin_rl.provenance import git_commit, sha256_file
 from margin_rl.train.analysis.conditions import CONDITIONS, DEFAULT_CONDITION, check_condition
 from margin_rl.train.analysis.media import plot_accelerations
 from margin_rl.train.analysis.significance import RESAMPLES, compare_variants, difference_table
@@ -72,7 +78,7 @@ from margin_rl.train.commands.options import (
     env_overrides,
     with_training_defaults,
 )
-from margin_rl.train.commands.train import DEFAULT_BACKEND, DEFAULT_NUM_ENVS, TrainSpec, make_spec, train
+from margin_rl.train.commands.train import DEFAULT_BACKEND, DEFAULT_NUM_ENVS, TrainSpec, load_spec, make_spec, train
 from margin_rl.train.environments import DEFAULT_ENV
 from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
 from margin_rl.train.recipes import RECIPES, get_recipe, with_recipe
@@ -239,19 +245,31 @@ def _evaluate_cell(
             in_run = config is not None and (config.parent / PROGRESS_FILE).is_file()
             folder = "eval" if main else "eval_grid"
             eval_dir = config.parent / folder if in_run else out / folder / f"{name.replace(' ', '_')}__s{seed}"
+            request = {
+                "policy_sha256": sha256_file(policy),
+                "env_overrides": _json_ready(dict(eval_env_overrides or {})),
+                "episodes": settings.eval_episodes,
+                "seed": settings.eval_seed,
+                "forward_velocity": command,
+                "warmup_s": settings.warmup_s,
+                "condition": condition,
+            }
             if not main:
                 eval_dir = eval_dir / cell_name(condition, command)
-            metrics, evaluation = evaluate(
-                policy,
-                env_overrides=eval_env_overrides,
-                episodes=settings.eval_episodes,
-                seed=settings.eval_seed,
-                forward_velocity=command,
-                warmup_s=settings.warmup_s,
-                out_dir=eval_dir,
-                condition=condition,
-            )
-            examples.setdefault(name, evaluation)
+                metrics = _reusable_evaluation(eval_dir, request)
+            if main or metrics is None:
+                metrics, evaluation = evaluate(
+                    policy,
+                    env_overrides=eval_env_overrides,
+                    episodes=settings.eval_episodes,
+                    seed=settings.eval_seed,
+                    forward_velocity=command,
+                    warmup_s=settings.warmup_s,
+                    out_dir=eval_dir,
+                    condition=condition,
+                )
+                write_json(eval_dir / REQUEST_FILE, request)
+                examples.setdefault(name, evaluation)
             summary = {k: v["mean"] for k, v in metrics["summary"].items()}
             run_dir = str(config.parent) if in_run else None
             runs.append({"seed": seed, "run_dir": run_dir, "policy": str(policy), "metrics": summary})
@@ -265,6 +283,24 @@ def _evaluate_cell(
             "std": {k: v[1] for k, v in table.items()},
         }
     return report, examples
+
+
+REQUEST_FILE = "request.json"
+"""Beside a compare evaluation's ``metrics.json``: what was asked (policy checksum, options, episodes, seeds, cell);
+a grid cell asked again with the same request reuses its metrics, so a long grid continues where it stopped."""
+
+
+def _json_ready(value: Any) -> Any:
+    """``value`` as JSON would give it back (config dataclasses as dicts, tuples as lists, paths as strings)."""
+    return json.loads(json.dumps(value, default=lambda o: asdict(o) if is_dataclass(o) else str(o)))
+
+
+def _reusable_evaluation(eval_dir: Path, request: dict[str, Any]) -> dict[str, Any] | None:
+    """The metrics of an evaluation in ``eval_dir`` made for exactly ``request``, else None."""
+    metrics, asked = eval_dir / "metrics.json", eval_dir / REQUEST_FILE
+    if not (metrics.is_file() and asked.is_file()) or read_json(asked) != request:
+        return None
+    return read_json(metrics)
 
 
 def _variant_statistics(variants: dict[str, Any]) -> dict[str, Any]:
@@ -417,6 +453,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="train nothing: evaluate a policy bundle (shipped name, e.g. anymal_b, or a folder) with the "
         "evaluation settings of its card unless given here",
     )
+    parser.add_argument(
+        "--runs",
+        nargs="+",
+        type=Path,
+        metavar="RUN_DIR",
+        help="train nothing: evaluate these finished runs (margin weight 0 and one other weight) like compare's own",
+    )
     parser.add_argument("--no-progress", action="store_true")
     return parser
 
@@ -454,6 +497,33 @@ def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
         device=args.device,
         **_eval_overrides(args),
     )
+
+
+def variants_of_runs(runs: list[Path]) -> tuple[str, dict[str, tuple[float, list[tuple[int, Path]]]]]:
+    """(environment id, variants) of finished training runs: margin weight 0 is "without margin", the one other
+    weight "with margin", each run's seed from its ``config.json``.
+
+    Raises:
+        ValueError: a run that is not finished, runs of several environments, or not exactly one nonzero weight.
+    """
+    found: dict[float, list[tuple[int, Path]]] = {}
+    env_ids = set()
+    for run in runs:
+        config, progress = run / CONFIG_FILE, run / PROGRESS_FILE
+        if not (config.is_file() and progress.is_file() and read_json(progress).get("finished")):
+            raise ValueError(f"--runs {run}: not a finished training run (no config.json, or progress not finished)")
+        data = read_json(config)
+        env_ids.add(data["env_id"])
+        weight = float(data["env_config"]["margin_weight"])
+        found.setdefault(weight, []).append((int(data["seed"]), run / final_model_name(data["backend"])))
+    weights = sorted(found)
+    if len(env_ids) != 1 or len(weights) != 2 or weights[0] != 0.0:
+        raise ValueError(
+            f"--runs: give finished runs of one environment with margin weight 0 and one other weight; got "
+            f"environments {sorted(env_ids)} and weights {weights}"
+        )
+    variants = {"without margin": (0.0, sorted(found[0.0])), "with margin": (weights[1], sorted(found[weights[1]]))}
+    return env_ids.pop(), variants
 
 
 def run_bundled(
@@ -504,7 +574,24 @@ def main(argv: list[str] | None = None) -> int:
     env_id = args.env or DEFAULT_ENV
     t0 = time.perf_counter()
     try:
-        if args.bundled is not None:
+        if args.runs is not None:
+            run_env, variants = variants_of_runs(args.runs)
+            first = load_spec(variants["with margin"][1][0][1].parent)
+            settings = dataclasses.replace(
+                _settings_from_args(args),
+                env_id=run_env,
+                backend=first.backend,
+                margin_weight=variants["with margin"][0],
+                seeds=tuple(seed for seed, _ in variants["with margin"][1]),
+                num_envs=first.num_envs,
+                total_steps=first.total_steps,
+                recipe=first.recipe,
+            )
+            out = args.out or Path("results") / f"compare__{run_env.split('/')[-1]}__runs"
+            options = env_overrides(args)
+            options.pop("margin_weight", None)  # the runs' variants fix their weights
+            report = evaluate_variants(variants, settings, out, None, options or None)
+        elif args.bundled is not None:
             out = args.out or Path("results") / f"bundled__{Path(args.bundled).name}"
             options = env_overrides(args)
             options.pop("margin_weight", None)  # the bundle's variants fix their weights

@@ -52,6 +52,18 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
     assert grid_report["grid"][2]["variants"]["with margin"]["runs"][0]["metrics"]["return"] == pytest.approx(
         direct["summary"]["return"]["mean"]
     )
+    # --runs evaluates the same finished runs without training; identical grid cells are reused, not re-run
+    cell_file = run / "eval_grid" / "friction_0.4__v1" / "metrics.json"
+    before = cell_file.stat().st_mtime_ns
+    runs = sorted(str(r) for r in (out / "runs").iterdir())
+    again = ["--eval-episodes", "2", "--warmup-s", "0.1", "--eval-commands", "1.0", "--eval-conditions", "friction_0.4"]
+    assert main([*again, "--runs", *runs, "--out", str(tmp_path / "from_runs")]) == 0
+    from_runs = json.loads((tmp_path / "from_runs" / "compare.json").read_text())
+    assert from_runs["grid"] == grid_report["grid"] and cell_file.stat().st_mtime_ns == before
+    assert (
+        from_runs["variants"]["with margin"]["runs"][0]["metrics"]
+        == report["variants"]["with margin"]["runs"][0]["metrics"]
+    )
     grid_markdown = (out / "compare.md").read_text()
     assert "| friction_0.4 | 1 | falls [fraction of episodes] |" in grid_markdown
     assert grid_markdown.count("| nominal | 0.75 |") == 4  # the main cell first, one row per grid metric
@@ -140,3 +152,28 @@ def test_unknown_bundle_is_a_clear_error(tmp_path: Path) -> None:
 
     with pytest.raises(ValueError, match="no policy bundle 'nope'"):
         load_bundle("nope")
+
+
+def test_runs_that_cannot_be_compared_are_named(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from margin_rl.train.commands.compare import variants_of_runs
+
+    with pytest.raises(ValueError, match="not a finished training run"):
+        variants_of_runs([tmp_path])
+    for weight, seed in ((0.0, 0), (0.2, 0), (0.5, 1)):  # two nonzero weights: which is "with margin"?
+        run = tmp_path / f"mw{weight}_s{seed}"
+        run.mkdir()
+        config = {
+            "env_id": "margin_rl/AnymalB-v1",
+            "seed": seed,
+            "backend": "rsl",
+            "env_config": {"margin_weight": weight},
+        }
+        (run / "config.json").write_text(json.dumps(config))
+        (run / "progress.json").write_text(json.dumps({"finished": True}))
+    with pytest.raises(ValueError, match=r"weight 0 and one other weight; got .* weights \[0.0, 0.2, 0.5\]"):
+        variants_of_runs(sorted(tmp_path.glob("mw*")))
+    env_id, variants = variants_of_runs(sorted(tmp_path.glob("mw0.[02]*")))
+    assert env_id == "margin_rl/AnymalB-v1" and variants["with margin"][0] == 0.2
+    with pytest.raises(SystemExit):
+        main(["--runs", str(tmp_path)])
+    assert "not a finished training run" in capsys.readouterr().err

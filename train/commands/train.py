@@ -401,37 +401,16 @@ def _run_backend(
     torch.manual_seed(spec.seed)
     np.random.seed(spec.seed % 2**32)
     final = run_dir / final_model_name(spec.backend)
+    threads = usable_cores() if update_threads is None else update_threads
+    learner = {"init_from": spec.init_from, "update_threads": threads}
     if isinstance(spec.ppo, RslPPOConfig):
         env = rsl_vec_env(spec.target, spec.num_envs, spec.seed)
         cfg = spec.backend_config(run_dir.name)
-        return train_rsl(
-            env,
-            cfg,
-            run_dir,
-            spec.device,
-            spec.total_iterations,
-            checkpoint,
-            hooks,
-            final,
-            init_from=spec.init_from,
-            update_threads=usable_cores() if update_threads is None else update_threads,
-        )
+        return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final, **learner)
     venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed)
     total = spec.total_iterations * spec.steps_per_iteration
-    return train_sb3(
-        venv,
-        spec.ppo,
-        run_dir,
-        spec.seed,
-        spec.device,
-        total,
-        spec.checkpoint_every,
-        checkpoint,
-        hooks,
-        final,
-        init_from=spec.init_from,
-        update_threads=usable_cores() if update_threads is None else update_threads,
-    )
+    every = spec.checkpoint_every
+    return train_sb3(venv, spec.ppo, run_dir, spec.seed, spec.device, total, every, checkpoint, hooks, final, **learner)
 
 
 # ---------------------------------------------------------------------------------------------------------------------

@@ -127,9 +127,10 @@ class CompareSettings:
             check_condition(condition)
 
     def grid_cells(self) -> list[tuple[str, float]]:
-        """The (condition, command) cells evaluated besides the main one, conditions outermost, in given order."""
+        """The (condition, command) cells evaluated besides the main one: conditions in the given order (nominal
+        first), commands ascending."""
         conditions = list(dict.fromkeys((DEFAULT_CONDITION, *self.grid_conditions)))
-        commands = list(dict.fromkeys((float(self.forward_velocity), *map(float, self.grid_commands))))
+        commands = sorted({float(self.forward_velocity), *map(float, self.grid_commands)})
         main = (DEFAULT_CONDITION, float(self.forward_velocity))
         return [(c, v) for c in conditions for v in commands if (c, v) != main]
 
@@ -367,38 +368,35 @@ GRID_METRICS: tuple[tuple[str, str], ...] = (
     ("ang_acc_rms", ".1f"),
 )
 """Metrics of the grid table (key, format)."""
+GRID_VARIANTS = ("without margin", "with margin")
+"""The grid table's variants, baseline first."""
 
 
 def grid_table(report: dict[str, Any]) -> list[str]:
-    """Markdown lines: per evaluation cell (the main one first) and metric, both variants' mean ± std over training
-    seeds, the difference with − without and Welch's p."""
+    """Markdown lines: one row per evaluation cell (conditions in the settings' order, commands ascending, the main
+    cell among them), per metric both variants' mean over training seeds as "without → with" and Welch's p over
+    seeds of the difference."""
     s = report["settings"]
-    cells = [
-        {"condition": DEFAULT_CONDITION, "forward_velocity": s["forward_velocity"], **report},
-        *report["grid"],
-    ]
+    main = {"condition": DEFAULT_CONDITION, "forward_velocity": s["forward_velocity"], **report}
+    order = list(dict.fromkeys((DEFAULT_CONDITION, *s.get("grid_conditions", ()))))
+    cells = sorted([main, *report["grid"]], key=lambda c: (order.index(c["condition"]), c["forward_velocity"]))
+    header = " | ".join(SUMMARY_METRICS.get(metric, metric) for metric, _ in GRID_METRICS)
     lines = [
         "Across evaluation conditions (margin_rl.train.analysis.conditions) and commands, the same policies, "
-        "episodes and seeds: mean ± std over training seeds; difference with − without, Welch's p over seeds.",
+        "episodes and seeds: without → with margin, each the mean over training seeds, and Welch's two-sided p over "
+        "seeds of the difference (– with fewer than two seeds per variant).",
         "",
-        "| condition | command [m/s] | metric | without margin | with margin | difference | p (Welch) |",
-        "|---|---|---|---|---|---|---|",
+        f"| condition | command [m/s] | {header} |",
+        "|---|---|" + "---|" * len(GRID_METRICS),
     ]
     for cell in cells:
+        row = f"| {cell['condition']} | {cell['forward_velocity']:g} |"
         for metric, fmt in GRID_METRICS:
-            values = []
-            for name in ("without margin", "with margin"):
-                variant = cell["variants"].get(name)
-                mean, std = (variant["mean"].get(metric), variant["std"].get(metric)) if variant else (None, None)
-                values.append("–" if mean is None else f"{mean:{fmt}} ± {std:{fmt}}")
-            difference = cell.get("statistics", {}).get(metric, {})
-            delta = difference.get("difference")
-            p_value = difference.get("p_value")
-            lines.append(
-                f"| {cell['condition']} | {cell['forward_velocity']:g} | {SUMMARY_METRICS.get(metric, metric)} | "
-                f"{values[0]} | {values[1]} | {'–' if delta is None else f'{delta:+{fmt[1:]}}'} | "
-                f"{'–' if p_value is None else f'{p_value:.2g}'} |"
-            )
+            means = [cell["variants"].get(name, {}).get("mean", {}).get(metric) for name in GRID_VARIANTS]
+            text = " → ".join("–" if m is None else f"{m:{fmt}}" for m in means)
+            p_value = cell.get("statistics", {}).get(metric, {}).get("p_value")
+            row += f" {text}{'' if p_value is None else f' (p = {p_value:.2g})'} |"
+        lines.append(row)
     return lines
 
 

@@ -31,7 +31,7 @@ measured for the baseline too. Outputs in ``<out>``:
 ``--eval-commands 0.5 1.0 --eval-conditions friction_0.4 mass_-20 mass_+20`` also evaluates every policy in each
 (condition, command) cell of the grid (conditions of :mod:`margin_rl.train.analysis.conditions`; the main cell is
 the nominal condition at ``--forward-velocity``), with the same episodes and seeds: ``"grid"`` in the JSON (each
-cell's variants and statistics, as for the main cell) and a table per cell and metric in the Markdown. A grid cell
+cell's variants and statistics, as for the main cell) and a table with one row per cell in the Markdown. A grid cell
 evaluated before for the same request (policy checksum, options, episodes, seeds: ``request.json``) is reused.
 
 ``--runs RUN_DIR ...`` trains nothing and evaluates finished runs (margin weight 0 and one other weight, e.g. runs

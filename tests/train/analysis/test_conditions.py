@@ -3,11 +3,19 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore
 from margin_rl.robot import load_robot
-from margin_rl.train.analysis.conditions import CONDITIONS, base_mass, check_condition, condition_config
+from margin_rl.train.analysis.conditions import (
+    CONDITIONS,
+    base_mass,
+    check_condition,
+    condition_config,
+    nominal_randomization,
+)
 
 TRAINING = EnvConfig(
     robot="anymal_b",
@@ -56,3 +64,37 @@ def test_unknown_condition_names_the_conditions() -> None:
     with pytest.raises(ValueError, match="unknown evaluation condition"):
         condition_config(TRAINING, "icy")
     assert set(CONDITIONS) >= {"nominal", "friction_0.4", "friction_1.0", "mass_-20", "mass_+20", "training"}
+
+
+_pairs = st.tuples(st.floats(0.0, 2.0), st.floats(0.0, 2.0)).map(sorted).map(tuple)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    friction=st.none() | _pairs,
+    mass=st.none() | st.tuples(st.floats(-5.0, 0.0), st.floats(0.0, 5.0)),
+    interval=st.none() | st.floats(0.5, 20.0),
+    noise=st.floats(0.0, 2.0),
+    joint_noise=st.floats(0.0, 0.5),
+    velocity_noise=st.floats(0.0, 0.5),
+)
+def test_nominal_removes_every_randomisation_and_keeps_the_initial_states(
+    friction, mass, interval, noise, joint_noise, velocity_noise
+) -> None:
+    training = RandomizationConfig(
+        friction=friction,
+        added_base_mass=mass,
+        push_interval_s=interval,
+        observation_noise=noise,
+        reset_joint_noise=joint_noise,
+        reset_velocity_noise=velocity_noise,
+    )
+    nominal = nominal_randomization(training)
+    assert (nominal.friction, nominal.added_base_mass, nominal.push_interval_s, nominal.observation_noise) == (
+        None, None, None, 0.0,
+    )  # fmt: skip
+    assert (nominal.reset_joint_noise, nominal.reset_velocity_noise) == (joint_noise, velocity_noise)
+    assert nominal_randomization(nominal) == nominal  # idempotent
+    for name in CONDITIONS:
+        if name != "training":  # no condition but "training" lets a training push through
+            assert condition_config(EnvConfig(randomization=training), name).randomization.push_interval_s is None

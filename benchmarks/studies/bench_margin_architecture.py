@@ -5,11 +5,15 @@
 
 Every run uses one seeded train / validation / test split of the whole dataset (``training.split_indices``),
 so the test states are the same for every row; ``--train-subset n`` trains on the first n samples of the
-training split (0: all of it), for a learning-curve point. A recipe is ``paper`` or ``physics[:w]`` (``w``
+training split (0: all of it), for a learning-curve point. A recipe is ``paper``, ``physics[:w]`` (``w``
 the proxy weight, default 1: the network learns the residual over the analytic proxy; 0: the features are
-inputs only). ``--mirror`` is shared by every row (default ``tied``, the bundled ANYmal C recipe). Reported
-per row: test RMSE, sign agreement (TPR / TNR), RMSE per number of contacts, the best validation RMSE and
-its epoch, the training time, and (last rows) the analytic proxy alone and its best affine rescaling.
+inputs only) or ``support[:K]`` (the support-function model of ``support_mlp`` with K fixed directions, default
+32, trained on mirror-augmented data since it is not tied) or ``shifted[:K]`` (the same with the load-shifted
+polygon as its prior). ``--mirror`` is shared by the other rows (default
+``tied``, the bundled ANYmal C recipe). Reported per row: test RMSE, sign agreement (TPR / TNR), RMSE per number
+of contacts, the best validation RMSE and its epoch, the training time, with ``--walking`` the RMSE and sign
+agreement on labelled walking states, and (last rows) the analytic proxy alone and its best affine rescaling;
+``--reference`` adds shipped weights judged on the same test and walking states.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ from margin_rl.stability.learned.evaluation import reliability
 from margin_rl.stability.learned.features import PROXY_INDEX, PhysicsConstants, physics_features
 from margin_rl.stability.learned.mlp_weights import architecture_widths
 from margin_rl.stability.learned.model import LearnedMargin
+from margin_rl.stability.learned.support_mlp import DEFAULT_DIRECTIONS, build_support_model
 from margin_rl.stability.learned.training import (
     TrainConfig,
     build_model,
@@ -37,14 +42,43 @@ from margin_rl.stability.learned.training import (
     test_metrics,
     to_margin_weights,
     training_split,
+    with_mirror_images,
 )
 
 
 def parse_recipe(text: str) -> tuple[str, float]:
-    name, _, weight = text.partition(":")
-    if name not in ("paper", "physics"):
-        raise argparse.ArgumentTypeError(f"recipe must be paper or physics[:w], got {text!r}")
-    return name, float(weight) if weight else 1.0
+    """``paper``, ``physics[:w]`` (w: the proxy weight, default 1), ``support[:K]`` or ``shifted[:K]`` (K fixed
+    directions; the support model with the polygon prior, or with the load-shifted polygon)."""
+    name, _, value = text.partition(":")
+    if name not in ("paper", "physics", "support", "shifted"):
+        raise argparse.ArgumentTypeError(f"recipe must be paper, physics[:w], support[:K] or shifted[:K], got {text!r}")
+    if name in ("support", "shifted"):
+        return name, float(value) if value else float(DEFAULT_DIRECTIONS)
+    return name, float(value) if value else 1.0
+
+
+class TorchMargin:
+    """A torch margin model called like :class:`LearnedMargin` on a batch (N, 47) -> (N,) numpy, for test_metrics."""
+
+    def __init__(self, module: torch.nn.Module) -> None:
+        self.module = module.eval()
+
+    def __call__(self, lam: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return self.module(torch.as_tensor(lam, dtype=torch.float32)).double().numpy()
+
+
+def fit_support(
+    lam: np.ndarray, margin: np.ndarray, split, train: np.ndarray, directions: int, prior: str, config, constants
+) -> tuple[TorchMargin, dict]:
+    """The support-function model (margin_rl.stability.learned.support_mlp) on raw lambda, mirror-augmented."""
+    torch.manual_seed(config.seed)
+    lam_fit, margin_fit = with_mirror_images(lam[train], margin[train])
+    model = build_support_model(
+        lam_fit, margin_fit, constants.foot_radius, constants.gravity, directions, prior, constants.mass
+    )
+    summary = fit(model, lam_fit, margin_fit, lam[split.val], margin[split.val], config, progress=False)
+    return TorchMargin(model), summary
 
 
 def main() -> None:
@@ -58,11 +92,21 @@ def main() -> None:
     parser.add_argument("--mirror", default="tied")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--max-samples", type=int, default=None, help="read only the first N ok samples")
+    parser.add_argument(
+        "--walking",
+        default=None,
+        help="labelled walking states (npz: lam, margin, status; bench_margin_rollout_holdout's label cache): "
+        "every model is also judged on their ok states",
+    )
+    parser.add_argument(
+        "--reference", action="append", default=[], help="shipped weights judged on the same states (e.g. anymal_c)"
+    )
     parser.add_argument("--out", default=None, help="write the rows as JSON here")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
-    ds = load_dataset(args.data)
+    ds = load_dataset(args.data, max_samples=args.max_samples)
     lam, margin = ds.lam.astype(np.float64), ds.margin.astype(np.float64)
     robot = str(ds.manifest["robot"])
     constants = PhysicsConstants.for_robot(load_robot(robot))
@@ -75,23 +119,57 @@ def main() -> None:
         f"{args.data}: {len(lam)} ok samples of {robot}; "
         f"split {len(split.train)} / {len(split.val)} / {len(split.test)}"
     )
+    walking = None
+    if args.walking:
+        with np.load(args.walking) as z:
+            ok = z["status"] == 0
+            walking = z["lam"][ok].astype(np.float64), z["margin"][ok].astype(np.float64)
+        print(f"{args.walking}: {len(walking[0])} walking states with an analytic margin")
+
+    def walking_scores(model) -> dict[str, float]:
+        if walking is None:
+            return {}
+        pred = np.asarray(model(walking[0]))
+        signs = reliability(pred, walking[1])
+        return {
+            "walking_rmse_cm": 100 * float(np.sqrt(np.mean((pred - walking[1]) ** 2))),
+            "walking_sign_agreement": signs.sign_agreement,
+        }
+
     rows = []
+    for name in args.reference:
+        reference = LearnedMargin.load(name)
+        metrics = test_metrics(reference, lam[split.test], margin[split.test])
+        row = {
+            "recipe": f"shipped {name}",
+            "test_rmse_cm": metrics["rmse_cm"],
+            "sign_agreement": metrics["sign_agreement"],
+            **walking_scores(reference),
+        }
+        rows.append(row)
+        print(json.dumps(row), flush=True)
     for subset in args.train_subset or [0]:
         train = split.train if subset <= 0 else split.train[:subset]
-        for architecture, proxy_weight in args.recipe:
-            config = dataclasses.replace(base, architecture=architecture, proxy_weight=proxy_weight)
-            data_in = model_inputs(lam, config, constants)
-            x, target = data_in.inputs, margin - data_in.offset
-            torch.manual_seed(config.seed)
-            model = build_model(x[train], target[train], config.mirror, architecture_widths(architecture))
-            x_fit, target_fit = training_split(x[train], target[train], config)
+        for architecture, value in args.recipe:
             t0 = time.perf_counter()
-            summary = fit(model, x_fit, target_fit, x[split.val], target[split.val], config, progress=False)
+            if architecture in ("support", "shifted"):
+                prior = "polygon" if architecture == "support" else "shifted"
+                learned, summary = fit_support(lam, margin, split, train, int(value), prior, base, constants)
+                recipe = f"{architecture}:{int(value)}"
+            else:
+                config = dataclasses.replace(base, architecture=architecture, proxy_weight=value)
+                data_in = model_inputs(lam, config, constants)
+                x, target = data_in.inputs, margin - data_in.offset
+                torch.manual_seed(config.seed)
+                model = build_model(x[train], target[train], config.mirror, architecture_widths(architecture))
+                x_fit, target_fit = training_split(x[train], target[train], config)
+                summary = fit(model, x_fit, target_fit, x[split.val], target[split.val], config, progress=False)
+                learned = LearnedMargin(to_margin_weights(model, config, constants))
+                recipe = architecture if architecture == "paper" else f"physics:{value:g}"
             seconds = time.perf_counter() - t0
-            learned = LearnedMargin(to_margin_weights(model, config, constants))
             metrics = test_metrics(learned, lam[split.test], margin[split.test])
             row = {
-                "recipe": architecture if architecture == "paper" else f"physics:{proxy_weight:g}",
+                "recipe": recipe,
                 "train_samples": len(train),
                 "test_rmse_cm": metrics["rmse_cm"],
                 "sign_agreement": metrics["sign_agreement"],
@@ -102,6 +180,8 @@ def main() -> None:
                 "best_epoch": summary["best_epoch"],
                 "last_train_rmse_cm": summary["last_train_rmse_cm"],
                 "train_seconds": seconds,
+                "epochs_run": summary["epochs_run"],
+                **walking_scores(learned),
             }
             rows.append(row)
             print(json.dumps(row), flush=True)

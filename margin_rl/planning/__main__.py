@@ -27,6 +27,11 @@ def main(argv: list[str] | None = None) -> int:
         "--hessian", choices=HESSIANS, default=PlannerConfig().hessian,
         help="IPOPT's Hessian of the Lagrangian: exact (the network's second derivatives) or quasi-newton (L-BFGS)",
     )  # fmt: skip
+    parser.add_argument(
+        "--weights", default=None,
+        help="learned-margin weights the plans are constrained by: a bundled name (e.g. anymal_c) or an .npz with "
+        "its card (default: the robot's Table I network, margin_rl.planning.mlp.planning_weights)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     names = list(SCENARIOS) if args.scenario == "all" else [args.scenario]
     unknown = [n for n in names if n not in SCENARIOS]
@@ -44,6 +49,7 @@ def main(argv: list[str] | None = None) -> int:
             contrast=not args.no_contrast,
             max_plans=args.max_plans,
             config=PlannerConfig(hessian=args.hessian),
+            weights=args.weights,
         )
         json.dump(summary, sys.stdout, indent=2, default=float)
         print()

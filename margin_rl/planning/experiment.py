@@ -46,14 +46,21 @@ def evaluate_scenario(
     contrast: bool = True,
     max_plans: int | None = None,
     config: PlannerConfig | None = None,
+    weights: str | Path | None = None,
 ) -> dict[str, object]:
     """Run and check one scenario; write ``<out>/<robot>_<scenario>_<gait>.{json,png,mp4}`` if ``out``.
 
-    Returns the summary written to the JSON file.
+    ``weights``: the learned margin the plans are constrained by (a bundled name such as ``"anymal_c"``, or an
+    ``.npz`` with its card); default :func:`~margin_rl.planning.mlp.planning_weights`. Returns the summary written
+    to the JSON file.
+
+    Raises:
+        WeightsError: unknown or corrupted weights (the message lists the bundled ones).
     """
     robot = load_robot(robot_name)
     model = planning_robot(robot)
-    margin_model = LearnedMargin.load(planning_weights(robot_name))
+    weights = planning_weights(robot_name) if weights is None else weights
+    margin_model = LearnedMargin.load(weights)
     scenario = get_scenario(scenario_name)
     gait = get_gait(gait_name)
     config = PlannerConfig() if config is None else config
@@ -61,6 +68,7 @@ def evaluate_scenario(
         "robot": robot_name,
         "scenario": scenario_name,
         "gait": gait_name,
+        "weights": {"name": str(weights), "sha256": margin_model.card.get("sha256")},
         "min_margin_m": gait.min_margin,
         "margin_bound_m": gait.min_margin + config.margin_backoff,
         "config": {k: v for k, v in asdict(config).items() if k != "ipopt_options"},

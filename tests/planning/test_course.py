@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import itertools
+import json
 
 import numpy as np
 import pytest
 
 from margin_rl.planning import WALK, PlannerConfig, check_course, get_scenario, lateral_com_offset, run_course
 from margin_rl.planning.__main__ import main
+from margin_rl.stability import LearnedMargin
+from margin_rl.stability.learned.mlp_weights import WeightsError
 
 
 @pytest.fixture(scope="module")
@@ -72,3 +75,14 @@ def test_cli_refuses_unknown_scenarios(capsys):
         main(["--scenario", "stairs"])
     assert exc.value.code == 2
     assert "side_step" in capsys.readouterr().err
+
+
+def test_cli_plans_with_other_weights_and_records_them(tmp_path, capsys):
+    """``--weights`` replaces the Table I network (here by the robot's default network) and the summary records
+    which weights constrained the plans; unknown weights are refused with the bundled names."""
+    main(["--scenario", "flat", "--max-plans", "1", "--no-video", "--no-contrast", "--weights", "anymal_c",
+          "--out", str(tmp_path)])  # fmt: skip
+    summary = json.loads((tmp_path / "anymal_c_flat_walk.json").read_text())
+    assert summary["weights"] == {"name": "anymal_c", "sha256": LearnedMargin.load("anymal_c").card["sha256"]}
+    with pytest.raises(WeightsError, match="anymal_c_table_i"):
+        main(["--scenario", "flat", "--max-plans", "1", "--weights", "anymal_x", "--out", str(tmp_path)])

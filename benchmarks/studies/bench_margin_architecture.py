@@ -9,8 +9,8 @@ training split (0: all of it), for a learning-curve point. A recipe is ``paper``
 the proxy weight, default 1: the network learns the residual over the analytic proxy; 0: the features are
 inputs only) or ``support[:K]`` (the support-function model of ``support_mlp`` with K fixed directions, default
 32, trained on mirror-augmented data since it is not tied) or ``shifted[:K]`` (the same with the load-shifted
-polygon as its prior). ``--mirror`` is shared by the other rows (default
-``tied``, the bundled ANYmal C recipe). Reported per row: test RMSE, sign agreement (TPR / TNR), RMSE per number
+polygon as its prior). ``--mirror`` is shared by the other rows (default ``tied``, the bundled ANYmal C
+recipe). Reported per row: test RMSE, sign agreement (TPR / TNR), RMSE per number
 of contacts, the best validation RMSE and its epoch, the training time, with ``--walking`` the RMSE and sign
 agreement on labelled walking states, and (last rows) the analytic proxy alone and its best affine rescaling;
 ``--reference`` adds shipped weights judged on the same test and walking states.

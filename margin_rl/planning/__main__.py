@@ -39,6 +39,15 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown scenario {unknown[0]!r}; choose from {', '.join(SCENARIOS)} or 'all'")
     from margin_rl.planning.experiment import evaluate_scenario
 
+    if args.weights is not None:
+        from margin_rl.stability import LearnedMargin
+        from margin_rl.stability.learned.model import WeightsError
+
+        try:  # refuse bad weights before the first course, not after it
+            LearnedMargin.load(args.weights)
+        except WeightsError as exc:
+            parser.error(f"--weights: {exc}")
+
     for name in names:
         summary = evaluate_scenario(
             args.robot,

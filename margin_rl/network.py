@@ -42,6 +42,7 @@ from margin_rl.provenance import sha256_file
 __all__ = [
     "ACTIVATIONS",
     "DenseNetwork",
+    "input_scaling",
     "layer_arrays",
     "read_arrays",
     "read_layers",
@@ -56,6 +57,19 @@ FloatArray = NDArray[np.float64]
 
 ACTIVATIONS: tuple[str, ...] = ("softsign", "relu")
 """Hidden-layer activations: ``softsign(z) = z / (1 + |z|)`` and ``relu(z) = max(z, 0)``."""
+
+
+MIN_INPUT_STD = 1e-8
+"""An input column whose training standard deviation is below this is constant (e.g. flat-ground normals)."""
+
+
+def input_scaling(x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+    """(mean, std) of each column of training inputs (N, in), in their dtype: the normalisation
+    :meth:`DenseNetwork.fold` takes; a constant column's std (below :data:`MIN_INPUT_STD`) is replaced by 1, so it
+    passes unscaled instead of being divided by zero."""
+    x = np.asarray(x)
+    std = x.std(axis=0)
+    return x.mean(axis=0), np.where(std > MIN_INPUT_STD, std, 1.0)
 
 
 def _check_activation(activation: str) -> str:

@@ -11,6 +11,7 @@ import pytest
 from margin_rl.network import (
     ACTIVATIONS,
     DenseNetwork,
+    input_scaling,
     layer_arrays,
     read_arrays,
     read_layers,
@@ -229,3 +230,15 @@ def test_hessian_matches_finite_differences_of_the_gradient(activation: str) -> 
 def test_hessian_needs_one_output() -> None:
     with pytest.raises(ValueError, match="one output"):
         fold(trained("softsign")).hessian(inputs(2))
+
+
+def test_input_scaling_leaves_constant_columns_unscaled_and_folds_to_unit_variance() -> None:
+    rng = np.random.default_rng(3)
+    x = np.column_stack([rng.normal(2.0, 3.0, 500), np.full(500, 1.0), rng.uniform(-1.0, 1.0, 500)])
+    mean, std = input_scaling(x)
+    np.testing.assert_allclose(mean, x.mean(axis=0))
+    np.testing.assert_allclose(std, [x[:, 0].std(), 1.0, x[:, 2].std()])
+    identity = DenseNetwork.fold([np.eye(3)], [np.zeros(3)], "softsign", in_offset=mean, in_scale=std)
+    scaled = identity(x)
+    np.testing.assert_allclose(scaled.std(axis=0), [1.0, 0.0, 1.0], atol=1e-12)
+    assert input_scaling(x.astype(np.float32))[1].dtype == np.float32  # the inputs' dtype, as before

@@ -47,7 +47,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from margin_rl.network import torch_sequential
+from margin_rl.network import input_scaling, torch_sequential
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, LAMBDA_SLICES, N_FEET
 from margin_rl.stability.learned.mlp_weights import ACTIVATION, ARCHITECTURE
 
@@ -195,10 +195,10 @@ def build_support_model(
         raise ValueError(
             f"lam_train (N, {LAMBDA_DIM}) and margin_train (N,) needed, got {lam_train.shape}, {margin_train.shape}"
         )
-    std = lam_train.std(axis=0)
+    input_mean, input_std = input_scaling(lam_train)
     return SupportMarginMLP(
-        input_mean=lam_train.mean(axis=0),
-        input_std=np.where(std > 1e-8, std, 1.0),
+        input_mean=input_mean,
+        input_std=input_std,
         output_mean=float(margin_train.mean()),
         output_std=float(margin_train.std()),
         foot_radius=foot_radius,

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from margin_rl.network import input_scaling
 from margin_rl.provenance import git_commit
 from margin_rl.robot import load_robot
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, LAMBDA_SLICES, lambda_names
@@ -205,10 +206,10 @@ def build_model(
     """
     if mirror != "none":
         lam_train, margin_train = with_mirror_images(lam_train, margin_train)
-    std = lam_train.std(axis=0)
+    input_mean, input_std = input_scaling(lam_train)
     return MarginMLP(
-        input_mean=lam_train.mean(axis=0),
-        input_std=np.where(std > 1e-8, std, 1.0),
+        input_mean=input_mean,
+        input_std=input_std,
         output_mean=float(margin_train.mean()),
         output_std=float(margin_train.std()),
         lam_low=lam_train.min(axis=0),

@@ -108,6 +108,21 @@ def check_margin_available(config: EnvConfig) -> None:
         ) from exc
 
 
+def margin_identity(config: EnvConfig) -> dict[str, Any] | None:
+    """Which learned margin an environment of ``config`` computes: ``{"source": robot name or weights path,
+    "sha256": of the weights}``, or None without a learned margin. A run records it when it starts, so that a
+    resumed session, a bundle or an evaluation can tell when the robot's default weights changed since."""
+    if config.margin != "learned":
+        return None
+    return weights_identity(config.margin_weights or config.robot)
+
+
+def weights_identity(source: str) -> dict[str, Any]:
+    """``{"source": source, "sha256": ...}`` of the learned-margin weights ``source`` (a robot name or an .npz
+    path) loads now."""
+    return {"source": source, "sha256": LearnedMargin.load(source).card.get("sha256")}
+
+
 def make_core(config: EnvConfig, num_envs: int, seed: int | None) -> AnymalCore:
     """The batched simulation of ``num_envs`` environments (reset by the adapters)."""
     return AnymalCore(config, num_envs=num_envs, seed=seed)

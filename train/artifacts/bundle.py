@@ -29,6 +29,7 @@ from typing import Any
 
 from margin_rl.provenance import sha256_file
 from margin_rl.stability.learned.model import LearnedMargin, weights_path
+from margin_rl.train.environments import weights_identity
 from margin_rl.train.metrics import summary_table
 from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, TORCHSCRIPT_FILE, read_json, write_json
 
@@ -171,12 +172,15 @@ def copy_margin_weights(entries: list[dict[str, Any]], folder: Path) -> dict[str
 def margin_model_identity(run_config: dict[str, Any]) -> dict[str, Any] | None:
     """Which learned margin a run's environment used: {"source": robot name or weights path, "sha256": of the
     weights}, or None when the run used no learned margin. Stored per policy in the card, so that evaluating
-    a bundled policy with other margin weights than it was trained with can be detected."""
+    a bundled policy with other margin weights than it was trained with can be detected. The identity the run
+    recorded when it started is used; runs recorded before that field existed fall back to the weights the
+    source loads now (:func:`copy_margin_weights` then checks them against every run of the bundle)."""
+    if "learned_margin" in run_config:
+        return run_config["learned_margin"]
     env = run_config.get("env_config") or {}
     if env.get("margin") != "learned":
         return None
-    source = env.get("margin_weights") or env["robot"]
-    return {"source": source, "sha256": LearnedMargin.load(source).card.get("sha256")}
+    return weights_identity(env.get("margin_weights") or env["robot"])
 
 
 def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path, Path, dict[str, Any]]:

@@ -33,6 +33,7 @@ for the layout.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import signal
 import sys
@@ -62,7 +63,14 @@ from margin_rl.train.config import (
     parse_assignments,
     to_dict,
 )
-from margin_rl.train.environments import DEFAULT_ENV, AnymalTarget, anymal_id, check_margin_available, env_target
+from margin_rl.train.environments import (
+    DEFAULT_ENV,
+    AnymalTarget,
+    anymal_id,
+    check_margin_available,
+    env_target,
+    margin_identity,
+)
 from margin_rl.train.recipes import RECIPES, get_recipe, with_recipe
 from margin_rl.train.runs import (
     CONFIG_FILE,
@@ -287,11 +295,32 @@ def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) 
     previous = read_json(path) if path.is_file() else {}
     if spec.init_from is not None:  # what the run started from: a resumed run keeps the first session's checksum
         data["init_from_sha256"] = previous.get("init_from_sha256") or sha256_file(spec.init_from)
+    # the learned margin's identity is the first session's: the weights a run started with are the ones it is
+    # trained and bundled with (runs recorded before this field existed fall back to the current weights)
+    data["learned_margin"] = previous.get("learned_margin") or margin_identity(spec.env_config)
     if previous:
         data["created"] = previous.get("created", now)
         data["command"] = previous.get("command", data["command"])
         data["sessions"] = [*previous.get("sessions", []), *data["sessions"]]
     return write_json(path, data)
+
+
+def check_same_margin(spec: TrainSpec, run_dir: Path) -> None:
+    """A resumed run must compute the learned margin its first session computed.
+
+    Raises:
+        ValueError: the weights recorded in ``config.json`` (e.g. the robot's default network when the run
+            started) differ from the ones the spec would load now, e.g. after the default network was replaced.
+    """
+    recorded = read_json(run_dir / CONFIG_FILE).get("learned_margin") if (run_dir / CONFIG_FILE).is_file() else None
+    current = margin_identity(spec.env_config)
+    if recorded is None or current is None or recorded["sha256"] == current["sha256"]:
+        return
+    raise ValueError(
+        f"{run_dir} was trained with the learned margin {recorded['source']!r} of sha256 {recorded['sha256'][:12]}…, "
+        f"but {current['source']!r} now loads weights of sha256 {current['sha256'][:12]}…: resume with "
+        "--margin-weights pointing at the weights the run started with, or start a new run"
+    )
 
 
 def load_spec(run_dir: str | Path) -> TrainSpec:
@@ -356,6 +385,8 @@ def train(
         checkpoint = None
     if checkpoint is None and spec.init_from is not None:  # a resumed run continues from its own checkpoint
         check_init_from(spec.init_from, spec.backend)
+    if checkpoint is not None:
+        check_same_margin(spec, run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     write_run_config(spec, run_dir, command)
     start = checkpoint_steps(checkpoint) if checkpoint is not None else 0
@@ -486,6 +517,10 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         changes = {k: v for k, v in (("total_steps", args.total_steps), ("device", args.device)) if v is not None}
         if changes:
             spec = TrainSpec.from_json({**spec.to_json(), **changes})
+        if getattr(args, "margin_weights", None) is not None:  # e.g. the weights the run started with
+            spec = dataclasses.replace(
+                spec, env_config=dataclasses.replace(spec.env_config, margin_weights=args.margin_weights)
+            )
         if spec.init_from is not None and latest_checkpoint(args.resume) is None:  # stopped before its first one
             check_init_from(spec.init_from, spec.backend)
         return spec, args.resume, True
@@ -525,6 +560,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         spec, run_dir, resume = spec_from_args(args)
         check_environment(spec)
+        if resume:
+            check_same_margin(spec, run_dir)
     except (ValueError, TypeError, FileNotFoundError) as exc:
         parser.error(str(exc))
     command = list(sys.argv if argv is None else ["margin-rl-train", *argv])

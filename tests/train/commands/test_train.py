@@ -107,6 +107,37 @@ def test_missing_margin_weights_is_a_clear_error(tmp_path: Path, capsys: pytest.
     assert "--margin none" in capsys.readouterr().err and not (tmp_path / "run").exists()
 
 
+def test_a_resumed_run_keeps_the_learned_margin_it_started_with(
+    tmp_path: Path, toy_weights: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The run records its weights' checksum; replacing the weights behind the same name (e.g. a new default
+    network) refuses the resume with a hint, and --margin-weights to the original weights continues the run."""
+    from margin_rl.stability.learned.model import LearnedMargin, save_weights
+    from tests.stability.learned.test_model import random_weights
+
+    weights = tmp_path / "weights" / "current"
+    weights.parent.mkdir()
+    save_weights(random_weights(0), weights, {"robot": "toy"})
+    started_with = str(weights.with_suffix(".npz"))
+    run_dir = tmp_path / "run"
+    assert train_module.main(tiny_args("rsl", run_dir, started_with, total=192, every=192)) == 0
+    recorded = json.loads((run_dir / "config.json").read_text())["learned_margin"]
+    assert recorded == {"source": started_with, "sha256": LearnedMargin.load(started_with).card["sha256"]}
+
+    original = tmp_path / "original.npz"
+    original.write_bytes(weights.with_suffix(".npz").read_bytes())
+    original.with_suffix(".json").write_text(weights.with_suffix(".json").read_text())
+    save_weights(random_weights(1), weights, {"robot": "toy"})  # other weights under the same path
+    extend = ["--resume", str(run_dir), "--total-steps", "384", "--no-progress"]
+    with pytest.raises(SystemExit):
+        train_module.main(extend)
+    error = capsys.readouterr().err
+    assert recorded["sha256"][:12] in error and "--margin-weights" in error
+    assert train_module.main([*extend, "--margin-weights", str(original)]) == 0
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["learned_margin"] == recorded and len(config["sessions"]) == 2
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # command-line defaults: the shipped experiment for the ANYmal ids
 # ---------------------------------------------------------------------------------------------------------------------

@@ -226,3 +226,81 @@ def test_welch_interval_matches_scipys_own() -> None:
     scipy_ci = stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
     assert result.welch_low == pytest.approx(-scipy_ci.high, rel=1e-12)
     assert result.welch_high == pytest.approx(-scipy_ci.low, rel=1e-12)
+
+
+def _study(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "studies" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _grid_report(variants: dict[float, dict[int, dict[str, float]]], commands=(0.5, 1.0)) -> dict:
+    """A compare report whose runs have the same metrics in the main cell and every grid cell (nominal only)."""
+
+    def cell_variants() -> dict:
+        return {
+            f"weight {weight:g}": {
+                "margin_weight": weight,
+                "runs": [{"seed": seed, "metrics": dict(metrics)} for seed, metrics in runs.items()],
+            }
+            for weight, runs in variants.items()
+        }
+
+    settings = {"env_id": "x", "eval_episodes": 64, "eval_seed": 5000, "forward_velocity": 0.75, "warmup_s": 1.0}
+    grid = [{"condition": "nominal", "forward_velocity": c, "variants": cell_variants()} for c in commands]
+    return {"settings": settings, "variants": cell_variants(), "grid": grid}
+
+
+def _metrics(fell: float, lin_acc: float) -> dict[str, float]:
+    return {"fell": fell, "velocity_error_mean": 0.04, "lin_acc_rms": lin_acc, "ang_acc_rms": 100.0,
+            "stance_width_mean": 0.5, "margin_mean": -0.2}  # fmt: skip
+
+
+def test_sweep_grid_reads_the_committed_pilot_like_its_benchmark() -> None:
+    """The committed two-seed ANYmal B pilot: weight 0.2 is not eligible, its worst cell friction 0.4 at 1.0 m/s
+    (58 of 128 episodes against 8: +39.1 points), and the main cell's linear acceleration change is the report's."""
+    module = _study("sweep_grid")
+    path = ROOT / "docs" / "comparison" / "robust_pilot" / "compare_anymal_b.json"
+    report = json.loads(path.read_text())
+    result = module.sweep(*module.collect_runs([(str(path), report)]))
+    verdict = result["rule"]["per_weight"]["0.2"]
+    assert verdict["worst_cell"] == "friction_0.4__v1" and not verdict["eligible"]
+    assert verdict["worst_excess_falls"] == pytest.approx((11 + 47 - 5 - 3) / 128)
+    assert verdict["lin_acc_relative_main"] == pytest.approx(report["statistics"]["lin_acc_rms"]["relative"])
+    assert result["rule"]["chosen"] is None and len(result["cells"]) == 12
+    assert result["cells"][:3] == ["nominal__v0.5", "nominal__v0.75", "nominal__v1"]
+    assert "| friction_0.4 1 m/s | 5 / 3 | 11 / 47 |" in module.markdown(result)
+
+
+def test_sweep_grid_rule_prefers_the_largest_weight_that_reaches_the_acceleration_target() -> None:
+    """Weights 0.1 (−20 % acceleration) and 0.5 (−10 %) within the falls tolerance, 0.2 one point and a half over it:
+    0.1 is chosen; without 0.1, the largest eligible weight (0.5) although it misses the acceleration target."""
+    module = _study("sweep_grid")
+    runs = {
+        0.0: {0: _metrics(0.0, 5.9), 1: _metrics(0.02, 6.1)},
+        0.1: {0: _metrics(0.01, 4.7), 1: _metrics(0.03, 4.9)},
+        0.2: {0: _metrics(0.0, 3.9), 1: _metrics(0.07, 4.1)},
+        0.5: {0: _metrics(0.01, 5.3), 1: _metrics(0.03, 5.5)},
+    }
+    result = module.sweep(*module.collect_runs([("r", _grid_report(runs))]))
+    rule = result["rule"]
+    assert [w for w, v in rule["per_weight"].items() if v["eligible"]] == ["0.1", "0.5"]
+    assert rule["per_weight"]["0.2"]["worst_excess_falls"] == pytest.approx(0.025)
+    assert rule["chosen"] == "0.1" and rule["chosen_reaches_acceleration_target"]
+    without = module.sweep(*module.collect_runs([("r", _grid_report({w: runs[w] for w in (0.0, 0.2, 0.5)}))]))
+    assert without["rule"]["chosen"] == "0.5" and not without["rule"]["chosen_reaches_acceleration_target"]
+
+
+def test_sweep_grid_refuses_reports_that_disagree_on_a_run() -> None:
+    module = _study("sweep_grid")
+    first = _grid_report({0.0: {0: _metrics(0.0, 6.0)}, 0.1: {0: _metrics(0.0, 5.0)}})
+    second = _grid_report({0.0: {0: _metrics(0.0, 6.5)}, 0.5: {0: _metrics(0.0, 5.0)}})
+    with pytest.raises(ValueError, match=r"margin weight 0, seed 0, .* b\.json and a\.json report different metrics"):
+        module.collect_runs([("a.json", first), ("b.json", second)])
+    other_protocol = json.loads(json.dumps(second))
+    other_protocol["settings"]["eval_seed"] = 1
+    with pytest.raises(ValueError, match="one evaluation protocol"):
+        module.collect_runs([("a.json", first), ("c.json", other_protocol)])
+    with pytest.raises(ValueError, match="needs runs of margin weight 0"):
+        module.sweep(*module.collect_runs([("d.json", _grid_report({0.1: {0: _metrics(0.0, 5.0)}}))]))

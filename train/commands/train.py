@@ -485,7 +485,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--resume",
         type=Path,
         metavar="RUN_DIR",
-        help="continue this run from its latest checkpoint (its config.json; --total-steps may extend it)",
+        help="continue this run from its latest checkpoint with its config.json's settings (--total-steps may "
+        "extend it, --checkpoint-every and --device change; options that define the run are refused)",
     )
     parser.add_argument(
         "--init-from",
@@ -508,13 +509,45 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+RUN_DEFINING_OPTIONS = (
+    ("--env", "env"),
+    ("--backend", "backend"),
+    ("--margin", "margin"),
+    ("--margin-weight", "margin_weight"),
+    ("--reward-preset", "reward_preset"),
+    ("--env-option", "env_option"),
+    ("--seed", "seed"),
+    ("--num-envs", "num_envs"),
+    ("--ppo-option", "ppo_option"),
+    ("--recipe", "recipe"),
+    ("--run-dir", "run_dir"),
+)
+"""(option, argparse dest) of the options that define a run: refused with ``--resume``, which continues the run with
+the settings its ``config.json`` recorded (``--margin-weights`` may point at the weights it started with)."""
+
+
 def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
     """(spec, run directory, resume) from parsed arguments."""
     if args.resume is not None:
         if args.init_from is not None:
             raise ValueError("--init-from starts a new run; --resume continues one from its own checkpoint: give one")
+        fixed = [option for option, dest in RUN_DEFINING_OPTIONS if getattr(args, dest, None) is not None]
+        if fixed:
+            raise ValueError(
+                f"--resume continues {args.resume} with the settings in its config.json; {', '.join(fixed)} would "
+                "change the run: drop them, or start a new run with --run-dir (--total-steps, --checkpoint-every and "
+                "--device may change on resume)"
+            )
         spec = load_spec(args.resume)
-        changes = {k: v for k, v in (("total_steps", args.total_steps), ("device", args.device)) if v is not None}
+        changes = {
+            key: value
+            for key, value in (
+                ("total_steps", args.total_steps),
+                ("checkpoint_every", args.checkpoint_every),
+                ("device", args.device),
+            )
+            if value is not None
+        }
         if changes:
             spec = TrainSpec.from_json({**spec.to_json(), **changes})
         if getattr(args, "margin_weights", None) is not None:  # e.g. the weights the run started with

@@ -179,3 +179,24 @@ def test_thread_counts_below_one_are_refused(capsys: pytest.CaptureFixture[str])
         with pytest.raises(SystemExit):
             train_module.main([option, "0"])
         assert f"{option} must be >= 1, got 0" in capsys.readouterr().err
+
+
+def test_resume_refuses_options_that_define_the_run(tmp_path: Path) -> None:
+    """--resume continues a run with its recorded settings: --seed 0 or --margin-weight 0 (falsy values too) would
+    silently not apply, so they are refused by name; --total-steps, --checkpoint-every and --device apply."""
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    train_module.write_run_config(_spec("--seed", "3", "--num-envs", "8"), run_dir, None)
+    parser = train_module.build_parser()
+    for argv, named in (
+        (["--seed", "0"], "--seed"),
+        (["--margin-weight", "0", "--num-envs", "16"], "--margin-weight, --num-envs"),
+        (["--env-option", "reward_params.alive_bonus=0"], "--env-option"),
+        (["--recipe", "robust"], "--recipe"),
+    ):
+        with pytest.raises(ValueError, match=f"{named} would change the run"):
+            train_module.spec_from_args(parser.parse_args(["--resume", str(run_dir), *argv]))
+    argv = ["--resume", str(run_dir), "--total-steps", "4096", "--checkpoint-every", "1024", "--device", "cpu"]
+    spec, resumed_dir, resume = train_module.spec_from_args(parser.parse_args(argv))
+    assert resume and resumed_dir == run_dir
+    assert (spec.seed, spec.num_envs, spec.total_steps, spec.checkpoint_every) == (3, 8, 4096, 1024)

@@ -39,11 +39,10 @@ trained one by one with ``train``) exactly like its own.
 
 Push recovery of the same policies: :mod:`margin_rl.train.commands.push_recovery` (``--bundled NAME`` or ``--variant``).
 
-``--bundle DIR`` then copies the runs' TorchScript actors and configs, and the learned-margin weights they were
-trained with, into a policy bundle with a card (:mod:`margin_rl.train.artifacts.bundle`); ``--bundled NAME`` trains
-nothing
-and evaluates a bundle the same way, with the bundle's margin weights, e.g. the shipped ANYmal B policies (the
-README's main job)::
+``--bundle DIR`` then copies the runs' TorchScript actors and configs (trained here or given by ``--runs``), and
+the learned-margin weights they were trained with, into a policy bundle with a card
+(:mod:`margin_rl.train.artifacts.bundle`); ``--bundled NAME`` trains nothing and evaluates a bundle the same way,
+with the bundle's margin weights, e.g. the shipped ANYmal B policies (the README's main job)::
 
     python -m margin_rl.train compare --bundled anymal_b_v1 --out results/anymal_b_v1
 
@@ -571,6 +570,8 @@ def main(argv: list[str] | None = None) -> int:
     command = ["margin-rl-compare", *(sys.argv[1:] if argv is None else argv)]
     env_id = args.env or DEFAULT_ENV
     t0 = time.perf_counter()
+    if args.bundle is not None and args.bundled is not None:
+        parser.error("--bundle writes the policies of trained or --runs runs; --bundled evaluates a bundle: give one")
     try:
         if args.runs is not None:
             run_env, variants = variants_of_runs(args.runs)
@@ -603,9 +604,9 @@ def main(argv: list[str] | None = None) -> int:
             options = with_training_defaults(env_id, options, margin_weight=False)
             out = args.out or Path("runs") / f"compare__{env_id.split('/')[-1]}__{args.backend}"
             report = run_compare(settings, out, options, progress=not args.no_progress)
-            if args.bundle is not None:
-                write_bundle(report, args.bundle, _provenance(command, time.perf_counter() - t0))
-                print(f"wrote the policy bundle {args.bundle}")
+        if args.bundle is not None:  # the policies of trained or given runs (--bundled is one already: refused)
+            write_bundle(report, args.bundle, _provenance(command, time.perf_counter() - t0))
+            print(f"wrote the policy bundle {args.bundle}")
     except (ValueError, TypeError) as exc:
         parser.error(str(exc))
     except KeyboardInterrupt as exc:

@@ -57,9 +57,12 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
     before = cell_file.stat().st_mtime_ns
     runs = sorted(str(r) for r in (out / "runs").iterdir())
     again = ["--eval-episodes", "2", "--warmup-s", "0.1", "--eval-commands", "1.0", "--eval-conditions", "friction_0.4"]
-    assert main([*again, "--runs", *runs, "--out", str(tmp_path / "from_runs")]) == 0
+    bundle = tmp_path / "bundle_of_runs"
+    assert main([*again, "--runs", *runs, "--out", str(tmp_path / "from_runs"), "--bundle", str(bundle)]) == 0
     from_runs = json.loads((tmp_path / "from_runs" / "compare.json").read_text())
     assert from_runs["grid"] == grid_report["grid"] and cell_file.stat().st_mtime_ns == before
+    card = json.loads((bundle / "card.json").read_text())  # --bundle writes the given runs' policies too
+    assert sorted(entry["margin_weight"] for entry in card["policies"]) == [0.0, 2.0]
     assert (
         from_runs["variants"]["with margin"]["runs"][0]["metrics"]
         == report["variants"]["with margin"]["runs"][0]["metrics"]
@@ -180,3 +183,6 @@ def test_runs_that_cannot_be_compared_are_named(tmp_path: Path, capsys: pytest.C
     with pytest.raises(SystemExit):
         main(["--runs", str(tmp_path)])
     assert "not a finished training run" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # a bundle is not written from a bundle
+        main(["--bundled", "anymal_b", "--bundle", str(tmp_path / "copy")])
+    assert "--bundled evaluates a bundle: give one" in capsys.readouterr().err and not (tmp_path / "copy").exists()

@@ -7,8 +7,8 @@ a grid cell already evaluated for the same policy is reused, so the weight-0 run
     python -m margin_rl.train compare --runs runs/robust_pilot/b_mw0_s* runs/robust_pilot/b_mw0.1_s* \\
         --eval-episodes 64 --eval-seed 5000 --eval-commands 0.5 1.0 \\
         --eval-conditions friction_0.4 mass_-20 mass_+20 --out results/sweep_b_mw0.1
-    python benchmarks/studies/sweep_grid.py results/sweep_b_mw*/compare.json \\
-        docs/comparison/robust_pilot/compare_anymal_b.json --json docs/comparison/robust_sweep_anymal_b.json
+    python benchmarks/studies/sweep_grid.py docs/comparison/robust_pilot/compare_anymal_b.json \\
+        results/sweep_b_mw*/compare.json --json docs/comparison/robust_sweep/sweep_anymal_b.json
 
 The inputs are ``compare.json`` reports (``compare --runs`` or ``compare`` with ``--eval-commands`` /
 ``--eval-conditions``) of one environment, with the same evaluation episodes and seed. A run is identified by its
@@ -16,7 +16,7 @@ margin weight and training seed; a run found in several reports must have the sa
 evaluation reused), otherwise the reports disagree and the script stops, naming the run.
 
 **The rule** (stated before the sweep's runs were evaluated): a weight is *eligible* when, in every grid cell, its
-falls (mean over its seeds) are at most weight 0's + 1 point, the falls target of the robust-walking work. Among the
+falls (mean over its seeds) are at most weight 0's + 1 point (the comparison's falls target). Among the
 eligible weights the largest whose base linear acceleration RMS at the main cell (nominal, the comparison's
 command) is at least 15 % below weight 0's is chosen (the acceleration target); if none is 15 % lower, the largest
 eligible weight. If no weight is eligible, none is chosen and the JSON says by how much each weight misses (its

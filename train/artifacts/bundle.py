@@ -278,17 +278,22 @@ def _replace_folder(new: Path, dest: Path) -> None:
 def card_markdown(card: dict[str, Any]) -> str:
     """The card for people: what was trained, how, from which commit, and the measured table."""
     s, p = card["settings"], card["provenance"]
+    # compare --runs evaluates runs trained before it (provenance "trained_here": False)
+    timed = "training and evaluation"
+    if not p.get("trained_here", True):
+        timed = "evaluation only: the runs were trained before"
     lines = [
         f"# Policy bundle `{card['name']}`",
         "",
         f"PPO ({s['backend']}) on `{s['env_id']}`, {len(s['seeds'])} training seeds {s['seeds']} per variant, "
-        f"{s['total_steps']:,} environment steps per run on {s['num_envs']} environments; environment options "
-        f"`{card['env_options']}`.",
+        f"{s['total_steps']:,} environment steps per run on {s['num_envs']} environments"
+        + (f", training recipe `{s['recipe']}`" if s.get("recipe") else "")
+        + f"; environment options `{card['env_options']}`.",
         "",
         f"- command: `{p.get('command', '?')}`",
         f"- package commit: `{p.get('commit', '?')}`",
         f"- machine: {p.get('machine', '?')}",
-        f"- wall time of the comparison (training and evaluation): {p.get('wall_time_s', float('nan')) / 60:.1f} min",
+        f"- wall time of the comparison ({timed}): {p.get('wall_time_s', float('nan')) / 60:.1f} min",
         *([f"- note: {p['note']}"] if p.get("note") else []),
         *(
             [

@@ -605,7 +605,9 @@ def main(argv: list[str] | None = None) -> int:
             out = args.out or Path("runs") / f"compare__{env_id.split('/')[-1]}__{args.backend}"
             report = run_compare(settings, out, options, progress=not args.no_progress)
         if args.bundle is not None:  # the policies of trained or given runs (--bundled is one already: refused)
-            write_bundle(report, args.bundle, _provenance(command, time.perf_counter() - t0))
+            provenance = _provenance(command, time.perf_counter() - t0)
+            provenance["trained_here"] = args.runs is None  # --runs: the wall time is the evaluation's only
+            write_bundle(report, args.bundle, provenance)
             print(f"wrote the policy bundle {args.bundle}")
     except (ValueError, TypeError) as exc:
         parser.error(str(exc))

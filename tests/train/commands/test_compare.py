@@ -63,6 +63,8 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
     assert from_runs["grid"] == grid_report["grid"] and cell_file.stat().st_mtime_ns == before
     card = json.loads((bundle / "card.json").read_text())  # --bundle writes the given runs' policies too
     assert sorted(entry["margin_weight"] for entry in card["policies"]) == [0.0, 2.0]
+    timed = "wall time of the comparison (evaluation only: the runs were trained before)"
+    assert timed in (bundle / "CARD.md").read_text()
     assert (
         from_runs["variants"]["with margin"]["runs"][0]["metrics"]
         == report["variants"]["with margin"]["runs"][0]["metrics"]

@@ -126,9 +126,8 @@ def sweep(protocol: dict[str, Any], runs: dict[tuple, dict]) -> dict[str, Any]:
                 "values": values,
                 "mean": {metric: _mean(v) for metric, v in values.items()},
             }
-            if weight != 0.0:
-                base_seeds = [s for s in sorted(s for w, s in runs if w == 0.0) if cell in runs[(0.0, s)]]
-                baseline = {m: [runs[(0.0, s)][cell][m] for s in base_seeds] for m in METRICS}
+            if weight != 0.0:  # weight 0 sorts first: its cells are in by_weight already
+                baseline = by_weight["0"]["cells"][_cell_key(cell)]["values"]
                 entry["versus_weight_0"] = {
                     metric: asdict(
                         compare_seeds(
@@ -170,11 +169,12 @@ def apply_rule(by_weight: dict[str, Any], main_cell: str) -> dict[str, Any]:
         }
         worst = max(excess, key=excess.get) if excess else None
         main = group["cells"].get(main_cell, {}).get("versus_weight_0", {}).get("lin_acc_rms", {})
+        over = sorted(cell for cell, value in excess.items() if value > FALLS_TOLERANCE + 1e-12)
         verdicts[weight] = {
             "worst_cell": worst,
             "worst_excess_falls": excess.get(worst),
-            "cells_over_tolerance": sorted(cell for cell, value in excess.items() if value > FALLS_TOLERANCE + 1e-12),
-            "eligible": bool(excess) and max(excess.values()) <= FALLS_TOLERANCE + 1e-12,
+            "cells_over_tolerance": over,
+            "eligible": bool(excess) and not over,
             "lin_acc_relative_main": main.get("relative"),
             "lin_acc_p_main": main.get("p_value"),
         }

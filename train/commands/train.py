@@ -510,19 +510,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 RUN_DEFINING_OPTIONS = (
-    ("--env", "env"),
-    ("--backend", "backend"),
-    ("--margin", "margin"),
-    ("--margin-weight", "margin_weight"),
-    ("--reward-preset", "reward_preset"),
-    ("--env-option", "env_option"),
-    ("--seed", "seed"),
-    ("--num-envs", "num_envs"),
-    ("--ppo-option", "ppo_option"),
-    ("--recipe", "recipe"),
-    ("--run-dir", "run_dir"),
+    "--env",
+    "--backend",
+    "--margin",
+    "--margin-weight",
+    "--reward-preset",
+    "--env-option",
+    "--seed",
+    "--num-envs",
+    "--ppo-option",
+    "--recipe",
+    "--run-dir",
 )
-"""(option, argparse dest) of the options that define a run: refused with ``--resume``, which continues the run with
+"""The options that define a run: refused with ``--resume``, which continues the run with
 the settings its ``config.json`` recorded (``--margin-weights`` may point at the weights it started with)."""
 
 
@@ -531,7 +531,7 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
     if args.resume is not None:
         if args.init_from is not None:
             raise ValueError("--init-from starts a new run; --resume continues one from its own checkpoint: give one")
-        fixed = [option for option, dest in RUN_DEFINING_OPTIONS if getattr(args, dest, None) is not None]
+        fixed = [option for option in RUN_DEFINING_OPTIONS if getattr(args, option[2:].replace("-", "_")) is not None]
         if fixed:
             raise ValueError(
                 f"--resume continues {args.resume} with the settings in its config.json; {', '.join(fixed)} would "

@@ -186,13 +186,18 @@ def test_difference_table_says_why_a_row_has_no_test() -> None:
     assert line == f"| falls | +0 | n/a | n/a | n/a | n/a ({note}) | [+0, +0] |"
 
 
+def _study(name: str):
+    """A script of benchmarks/studies, loaded as a module."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "studies" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def test_summarise_runs_compares_each_weight_with_weight_zero() -> None:
     """The committed ANYmal B sweep (three seeds per weight): accelerations significantly lower at 0.2 and 0.5,
     falls not significantly different, as its commit states."""
-    script = ROOT / "benchmarks" / "studies" / "summarise_runs.py"
-    spec = importlib.util.spec_from_file_location("summarise_runs", script)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = _study("summarise_runs")
     runs = json.loads((ROOT / "docs" / "comparison" / "v2_sweep_anymal_b.json").read_text())["runs"]
     versus = module.versus_baseline(runs)
     assert list(versus) == ["0.2", "0.5"] and set(versus["0.2"]) == set(module.METRICS)
@@ -226,13 +231,6 @@ def test_welch_interval_matches_scipys_own() -> None:
     scipy_ci = stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
     assert result.welch_low == pytest.approx(-scipy_ci.high, rel=1e-12)
     assert result.welch_high == pytest.approx(-scipy_ci.low, rel=1e-12)
-
-
-def _study(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / "studies" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _grid_report(variants: dict[float, dict[int, dict[str, float]]], commands=(0.5, 1.0)) -> dict:

@@ -9,7 +9,8 @@ and the accepted values. Valid values are stored as given, never converted, with
 given for ``EnvConfig.reward_params`` becomes a :class:`RewardParams` (its keys checked by name).
 
 The reward's added weights and parameters live in one mapping, ``EnvConfig.reward_params``
-(:class:`RewardParams`: ``alive_bonus``, ``knee_clearance``, ``knee_clearance_height``, ``logistic_gain``);
+(:class:`RewardParams`: ``alive_bonus``, ``knee_clearance``, ``knee_clearance_height``, ``base_height``,
+``base_height_fraction``, ``logistic_gain``);
 until EnvConfig v1 (the ``-v1`` ids) they were top-level fields. Stored v0 configs are translated in one place,
 :func:`upgrade_stored_env_config` (table :data:`LEGACY_FIELDS`).
 """
@@ -291,6 +292,12 @@ class RewardParams(Mapping):
     # policies fall"); the comparison gives both variants the same term.
     knee_clearance: float = 0.0
     knee_clearance_height: float = 0.2  # [m] above the terrain under the knee
+    # Penalty per metre of base below base_height_fraction x the MJCF standing keyframe's base height (term
+    # "base_height", 0: off), added to any preset. The knee term moves the margin policies' crouch rather than
+    # removing it (BENCHMARKS "Margin weight sweep under the robust recipe"); this asks for the body height
+    # itself. One-sided: a policy may walk taller; the comparison gives both variants the same term.
+    base_height: float = 0.0
+    base_height_fraction: float = 0.9  # of the standing keyframe's base height above the floor
     logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
 
     def __post_init__(self) -> None:
@@ -301,6 +308,17 @@ class RewardParams(Mapping):
         )
         check_number(
             f"{where}.knee_clearance_height", self.knee_clearance_height, minimum=0.0, hint="[m] above the terrain"
+        )
+        check_number(
+            f"{where}.base_height", self.base_height, minimum=0.0, hint="penalty per m of base too low, 0: off"
+        )
+        check_number(
+            f"{where}.base_height_fraction",
+            self.base_height_fraction,
+            minimum=0.0,
+            maximum=1.5,
+            min_open=True,
+            hint="of the standing keyframe's base height",
         )
         # L is even (L(x) = L(-x)), so only the gain's size matters; 0 would make the velocity term constant.
         check_number(f"{where}.logistic_gain", self.logistic_gain, minimum=0.0, min_open=True, hint="[s/m]")
@@ -452,6 +470,8 @@ class EnvConfig:
             weights["alive"] = weights.get("alive", 0.0) + params.alive_bonus
         if params.knee_clearance:
             weights["knee_clearance"] = weights.get("knee_clearance", 0.0) - params.knee_clearance
+        if params.base_height:
+            weights["base_height"] = weights.get("base_height", 0.0) - params.base_height
         return weights
 
 

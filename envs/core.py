@@ -279,6 +279,7 @@ class AnymalCore:
         acc = self._estimate_accelerations(state)
         stability, margin = self._stability(state, acc)
         touchdown, air_at_touchdown = self._track_air_time(state.contacts)
+        base_height = state.base_pos[:, 2] - self.terrain.height(state.base_pos[:, :2])
         values = {
             **self._policy_values(state, slice(None)),
             "margin": margin,
@@ -289,14 +290,18 @@ class AnymalCore:
             "touchdown": touchdown,
             "air_time_at_touchdown": air_at_touchdown,
             "thigh_contacts": state.thigh_contacts,
+            "base_height": base_height,
         }
         weights = cfg.reward_weights
         if "knee_clearance" in weights:  # a terrain lookup per knee: only when the term is on
             values["knee_heights"] = state.knees[..., 2] - self.terrain.height(state.knees[..., :2])
             values["knee_clearance_height"] = np.full(self.num_envs, cfg.reward_params.knee_clearance_height)
+        if "base_height" in weights:
+            target = cfg.reward_params.base_height_fraction * self.robot.standing_height
+            values["base_height_target"] = np.full(self.num_envs, target)
         reward, terms = compute_rewards(weights, values, cfg.reward_params.logistic_gain)
         self.last_action = action.copy()
-        causes = self._terminations(state, diverged)
+        causes = self._terminations(state, base_height, diverged)
         terminated = any_cause(causes)
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
         info = self._info(state, acc, values, terms, margin, stability, terminated, diverged, causes)
@@ -398,12 +403,15 @@ class AnymalCore:
         self._prev_contacts = contacts.copy()
         return touchdown, air_at_touchdown
 
-    def _terminations(self, state: SimulationState, diverged: np.ndarray) -> dict[str, np.ndarray]:
-        """(N,) flags of each cause of :mod:`margin_rl.envs.terminations` (OR'ed, they are ``terminated``)."""
+    def _terminations(
+        self, state: SimulationState, base_height: np.ndarray, diverged: np.ndarray
+    ) -> dict[str, np.ndarray]:
+        """(N,) flags of each cause of :mod:`margin_rl.envs.terminations` (OR'ed, they are ``terminated``);
+        ``base_height`` [m] above the terrain under the base."""
         inputs = {
             "base_contact": state.base_contact,
             "thigh_contacts": state.thigh_contacts,
-            "base_height": state.base_pos[:, 2] - self.terrain.height(state.base_pos[:, :2]),
+            "base_height": base_height,
             "tilt_cos": state.base_rot[:, 2, 2],
             "diverged": diverged,
         }
@@ -433,6 +441,7 @@ class AnymalCore:
             "velocity_error": np.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
             "contacts": state.contacts.astype(np.float64),
             "stance_width": stance_width(stability.feet),  # feet in H, as they entered lambda
+            "base_height": values["base_height"],  # base origin above the terrain under it [m]
             "lambda": self._last_lambda,  # (N, 47), the margin's input (names: stability.lambda_names())
             "fell": (terminated & ~diverged).astype(np.float64),
             "diverged": diverged.astype(np.float64),

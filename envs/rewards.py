@@ -87,6 +87,13 @@ def knee_clearance(s: Arrays, gain: float) -> np.ndarray:
     return np.sum(np.maximum(deficit, 0.0), axis=1)
 
 
+def base_height(s: Arrays, gain: float) -> np.ndarray:
+    """How far the base origin is below its target height above the terrain under it [m]:
+    max(0, h_target - h_base), zero at or above the target (target: RewardParams.base_height_fraction times
+    the MJCF standing keyframe's base height)."""
+    return np.maximum(s["base_height_target"] - s["base_height"], 0.0)
+
+
 REWARD_TERMS: dict[str, Callable[[Arrays, float], np.ndarray]] = {
     f.__name__: f
     for f in (
@@ -104,6 +111,7 @@ REWARD_TERMS: dict[str, Callable[[Arrays, float], np.ndarray]] = {
         feet_air_time,
         collisions,
         knee_clearance,
+        base_height,
     )
 }
 

@@ -16,6 +16,7 @@ every episode that ends. Metric names and units:
 ``velocity_error_mean``          mean |v_cmd − ẋ| of the heading velocity [m/s]
 ``forward_velocity_mean``        mean heading velocity ẋ in the base frame [m/s]
 ``stance_width_mean``            mean lateral foot spread in the heading frame [m]
+``base_height_mean``             mean height of the base origin above the terrain under it [m]
 ``fell``, ``diverged``           1 if the episode ended in a fall / a diverged simulation, else 0
 ``termination/<cause>``          1 if the cause held on the episode's last step (``info["termination_<cause>"]``;
                                  the causes of :mod:`margin_rl.envs.terminations`, several may hold at once)
@@ -85,6 +86,7 @@ class EpisodeStatistics:
         self._vel_err = np.zeros(n)
         self._fwd_vel = np.zeros(n)
         self._stance = np.zeros(n)
+        self._base_height = np.zeros(n)
 
     def reset(self, ids: np.ndarray | None = None) -> None:
         """Start new episodes in environments ``ids`` (all if None)."""
@@ -103,6 +105,7 @@ class EpisodeStatistics:
             self._vel_err,
             self._fwd_vel,
             self._stance,
+            self._base_height,
         ):
             array[ids] = 0
         self._margin_min[ids] = np.inf
@@ -137,6 +140,7 @@ class EpisodeStatistics:
         self._vel_err += info["velocity_error"]
         self._fwd_vel += np.asarray(info["base_lin_vel"])[:, 0]
         self._stance += info["stance_width"]
+        self._base_height += info["base_height"]
         done = np.asarray(terminated, dtype=bool) | np.asarray(truncated, dtype=bool)
         if not done.any():
             return {}
@@ -180,6 +184,7 @@ class EpisodeStatistics:
         metrics["velocity_error_mean"] = self._vel_err[ids] / length
         metrics["forward_velocity_mean"] = self._fwd_vel[ids] / length
         metrics["stance_width_mean"] = self._stance[ids] / length
+        metrics["base_height_mean"] = self._base_height[ids] / length
         metrics["fell"] = np.asarray(info["fell"], dtype=float)[ids]
         metrics["diverged"] = np.asarray(info["diverged"], dtype=float)[ids]
         for cause in CAUSE_NAMES:

@@ -393,10 +393,42 @@ def test_knee_clearance_term_matches_the_shank_bodies_in_mujoco(toy_weights: str
         np.testing.assert_allclose(out.info["reward_knee_clearance"][env], expected, rtol=0, atol=1e-9)
 
 
+def test_base_height_term_matches_the_base_body_in_mujoco(toy_weights: str) -> None:
+    """The term is max(0, f h_standing - z_base), h_standing read from the MJCF's standing keyframe independently
+    of the environment (model.key_qpos) and z_base from an independent mj_forward of the same state; the step's
+    info reports the height either way, and the term is off by default."""
+    config = EnvConfig(robot="anymal_b", margin_weights=toy_weights, randomization=NO_NOISE)
+    off = AnymalCore(config, 1, seed=0)
+    off.reset()
+    assert "reward_base_height" not in off.step(np.zeros((1, 12))).info
+
+    fraction = 1.2  # above the standing base, so the term is active at once
+    core = AnymalCore(config.replace(reward_params={"base_height": 3.0, "base_height_fraction": fraction}), 2, 0)
+    core.reset()
+    key = mujoco.mj_name2id(core.model, mujoco.mjtObj.mjOBJ_KEY, "standing")
+    standing_height = core.model.key_qpos[key, 2]  # flat floor at z = 0
+    for _ in range(5):
+        out = core.step(np.zeros((2, 12)))
+    for env in range(2):
+        base_z = core.render_data(env).body("base").xpos[2]
+        np.testing.assert_allclose(out.info["base_height"][env], base_z, rtol=0, atol=1e-9)
+        expected = -3.0 * max(fraction * standing_height - base_z, 0.0)
+        assert expected < -0.05
+        np.testing.assert_allclose(out.info["reward_base_height"][env], expected, rtol=0, atol=1e-9)
+
+
 @pytest.mark.parametrize(
-    ("field", "value"), [("knee_clearance", -1.0), ("knee_clearance_height", -0.1), ("knee_clearance", np.nan)]
+    ("field", "value"),
+    [
+        ("knee_clearance", -1.0),
+        ("knee_clearance_height", -0.1),
+        ("knee_clearance", np.nan),
+        ("base_height", -1.0),
+        ("base_height_fraction", 0.0),
+        ("base_height_fraction", 2.0),
+    ],
 )
-def test_knee_clearance_rejects_bad_values(field: str, value: float) -> None:
+def test_knee_clearance_and_base_height_reject_bad_values(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         EnvConfig(reward_params={field: value})
 

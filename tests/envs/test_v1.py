@@ -132,13 +132,16 @@ def test_reward_params_is_one_checked_mapping() -> None:
         "alive_bonus": 0.1,
         "knee_clearance": 0.0,
         "knee_clearance_height": 0.2,
+        "base_height": 0.0,
+        "base_height_fraction": 0.9,
         "logistic_gain": 8.0,
     }
-    assert params["alive_bonus"] == params.alive_bonus == 0.1 and len(params) == 4
+    assert params["alive_bonus"] == params.alive_bonus == 0.1 and len(params) == 6
     with pytest.raises(KeyError, match="the reward parameters are alive_bonus"):
         params["bonus"]
     assert EnvConfig(reward_params={"alive_bonus": 0.1}).reward_params == params
-    assert set(LEGACY_FIELDS) == set(RewardParams.keys_known())
+    # every v0 top-level reward field lives in the mapping (keys added since v1 never were top-level)
+    assert set(LEGACY_FIELDS) <= set(RewardParams.keys_known())
 
 
 def test_keyword_use_changes_only_the_named_keys() -> None:
@@ -162,7 +165,7 @@ def test_stored_v0_configs_are_translated_in_one_place() -> None:
     from margin_rl.train.config import from_dict, to_dict
 
     stored = to_dict(EnvConfig(robot="anymal_b"))
-    params = stored.pop("reward_params")
+    params = {key: value for key, value in stored.pop("reward_params").items() if key in LEGACY_FIELDS}
     v0 = {**stored, **params, "alive_bonus": 0.1, "knee_clearance": 5.0}  # the v0 layout: top-level fields
     upgraded = upgrade_stored_env_config(v0)
     assert "alive_bonus" not in upgraded and upgraded["reward_params"]["knee_clearance"] == 5.0

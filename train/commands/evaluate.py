@@ -211,6 +211,7 @@ PRINTED_METRICS: tuple[str, ...] = (
     "lin_acc_rms",
     "ang_acc_rms",
     "stance_width_mean",
+    "base_height_mean",
     "margin_mean",
     "fell",
 )

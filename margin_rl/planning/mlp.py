@@ -20,6 +20,11 @@ its own: the block-diagonal second derivatives, one 47 x 47 Hessian per column, 
 :meth:`margin_rl.network.DenseNetwork.hessian` (exact second-order backpropagation, ~5 ms for 16 columns)
 through a CasADi callback. CasADi's generic second derivatives of the network cost ~250 ms per IPOPT
 iteration (measured); the callback is only called when second derivatives are asked for.
+
+The planner's IPOPT does not take its Hessian through this callback by default: it is given the Lagrangian's
+Hessian assembled by the chain rule (:mod:`margin_rl.planning.lagrangian`), the same matrix at about 1.5x less time
+per iteration. The callback serves any CasADi expression built on this function (``ca.hessian`` of it) and the
+benchmark's contrast (``TrajectoryProblem(..., chain_rule_hessian=False)``).
 """
 
 from __future__ import annotations

@@ -111,8 +111,8 @@ class PlannerConfig:
     weight_acc: float = 0.02  # w_a [s^3/m^2]
     weight_centroid: float = 0.0  # w_c, contrast only
     max_iter: int = 150
-    # IPOPT's Hessian of the Lagrangian: "exact" (the network's block-diagonal second derivatives in numpy,
-    # margin_rl.planning.mlp: 8-17 iterations per horizon, every horizon of the eight courses converged) or
+    # IPOPT's Hessian of the Lagrangian: "exact" (the network's block Hessians in numpy, assembled with the lambda
+    # map's derivatives by the chain rule, margin_rl.planning.lagrangian: 8-17 iterations per horizon) or
     # "quasi-newton" (L-BFGS: 80-120 iterations, 87-100 % converged; the analytic_fd margin has only first derivatives)
     hessian: str = "exact"
     tol: float = 1e-3  # IPOPT tol (scaled optimality error); constraints are met to constr_viol_tol 1e-4
@@ -241,6 +241,10 @@ class TrajectoryProblem:
         config: the planner settings.
         margin_model: the learned margin (``LearnedMargin``) for ``config.margin == "learned"`` (also
             used to report the learned margin of plans made with another kind).
+        chain_rule_hessian: with the learned margin and the exact Hessian, give IPOPT the Lagrangian's Hessian
+            assembled by the chain rule (:mod:`margin_rl.planning.lagrangian`); False: CasADi's own second
+            derivatives through the network's callbacks, the same matrix at about twice the cost per iteration
+            (kept for the benchmark and the tests).
     """
 
     def __init__(
@@ -251,6 +255,8 @@ class TrajectoryProblem:
         t0: float,
         config: PlannerConfig,
         margin_model: object | None = None,
+        *,
+        chain_rule_hessian: bool = True,
     ) -> None:
         import casadi as ca
 
@@ -406,6 +412,14 @@ class TrajectoryProblem:
             "ipopt.hessian_approximation": HESSIANS[config.hessian],
             "ipopt.mu_strategy": "adaptive",
         }
+        if config.margin == "learned" and config.hessian == "exact" and chain_rule_hessian:
+            from margin_rl.planning.lagrangian import margin_lagrangian_hessian
+
+            # Kept with the problem, like the margin function: its chain-rule callback is Python.
+            assert self._margin_rows == slice(0, n_nodes)  # the margin rows come first (added first above)
+            others = ca.vertcat(*g[1:])
+            self._hess_lag = margin_lagrangian_hessian(z, par, cost, others, LAM, margin_model.network)
+            opts["hess_lag"] = self._hess_lag
         opts.update({f"ipopt.{key}": value for key, value in config.ipopt_options})
         self.solver = ca.nlpsol("trajectory", "ipopt", {"x": z, "p": par, "f": cost, "g": self._g}, opts)
         self.lambda_function = ca.Function("lambdas", [z, par], [LAM])

@@ -201,6 +201,9 @@ def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path,
         "training_sessions": len(sessions),
         "steps_per_s_last_session": progress.get("session_steps_per_s"),
         "learned_margin": margin_model_identity(run_config),
+        # how the run was trained (its first session's command line; a warm start names its source model)
+        "training_command": " ".join(str(part) for part in run_config.get("command", [])) or None,
+        "init_from": run_config.get("init_from"),
         "metrics": run["metrics"],
     }
     return policy, config, facts
@@ -282,13 +285,22 @@ def card_markdown(card: dict[str, Any]) -> str:
     timed = "training and evaluation"
     if not p.get("trained_here", True):
         timed = "evaluation only: the runs were trained before"
+    # the seeds of each variant, from the policies (a --runs comparison may hold more seeds of one variant)
+    seeds: dict[str, list[int]] = {}
+    for e in card["policies"]:
+        seeds.setdefault(e["variant"], []).append(e["seed"])
+    seed_text = "; ".join(f"{variant}: seeds {sorted(found)}" for variant, found in seeds.items())
+    if p.get("trained_here", True):
+        options = f"environment options `{card['env_options']}`"
+    else:  # compare --runs: each run's own options, in its training command below and its config.json
+        options = "each run's environment options are in its training command below"
     lines = [
         f"# Policy bundle `{card['name']}`",
         "",
-        f"PPO ({s['backend']}) on `{s['env_id']}`, {len(s['seeds'])} training seeds {s['seeds']} per variant, "
+        f"PPO ({s['backend']}) on `{s['env_id']}`, {seed_text}; "
         f"{s['total_steps']:,} environment steps per run on {s['num_envs']} environments"
         + (f", training recipe `{s['recipe']}`" if s.get("recipe") else "")
-        + f"; environment options `{card['env_options']}`.",
+        + f"; {options}.",
         "",
         f"- command: `{p.get('command', '?')}`",
         f"- package commit: `{p.get('commit', '?')}`",
@@ -314,4 +326,8 @@ def card_markdown(card: dict[str, Any]) -> str:
         steps = f"{e['env_steps']:,}" if e.get("env_steps") is not None else "?"
         digest = e["policy_sha256"][:12]
         lines.append(f"| `{e['policy']}` | {e['margin_weight']:g} | {e['seed']} | {steps} | {digest} |")
+    commands = [e for e in card["policies"] if e.get("training_command")]
+    if commands and not p.get("trained_here", True):
+        lines += ["", "Training commands (each run's `config.json`):", ""]
+        lines += [f"- `{e['policy']}`: `{e['training_command']}`" for e in commands]
     return "\n".join(lines) + "\n"

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from margin_rl.train.artifacts.bundle import card_markdown
 from margin_rl.train.commands.compare import main
 from margin_rl.train.commands.evaluate import evaluate
 from margin_rl.train.metrics import SUMMARY_METRICS
@@ -64,7 +65,12 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
     card = json.loads((bundle / "card.json").read_text())  # --bundle writes the given runs' policies too
     assert sorted(entry["margin_weight"] for entry in card["policies"]) == [0.0, 2.0]
     timed = "wall time of the comparison (evaluation only: the runs were trained before)"
-    assert timed in (bundle / "CARD.md").read_text()
+    card_text = (bundle / "CARD.md").read_text()
+    assert timed in card_text and "without margin: seeds [0]; with margin: seeds [0]" in card_text
+    # each run's training command, from its config.json (runs trained by compare itself record none)
+    assert all(entry["training_command"] is None and entry["init_from"] is None for entry in card["policies"])
+    card["policies"][1]["training_command"] = "margin-rl-train --seed 0 --init-from base.pt"
+    assert "`with_margin__s0/policy.pt`: `margin-rl-train --seed 0 --init-from base.pt`" in card_markdown(card)
     assert (
         from_runs["variants"]["with margin"]["runs"][0]["metrics"]
         == report["variants"]["with margin"]["runs"][0]["metrics"]

@@ -243,8 +243,8 @@ class TrajectoryProblem:
             used to report the learned margin of plans made with another kind).
         chain_rule_hessian: with the learned margin and the exact Hessian, give IPOPT the Lagrangian's Hessian
             assembled by the chain rule (:mod:`margin_rl.planning.lagrangian`); False: CasADi's own second
-            derivatives through the network's callbacks, the same matrix at about twice the cost per iteration
-            (kept for the benchmark and the tests).
+            derivatives through the network's callbacks, the same matrix at about 1.5 times the time per
+            iteration (kept for the benchmark and the tests).
     """
 
     def __init__(
@@ -416,7 +416,8 @@ class TrajectoryProblem:
             from margin_rl.planning.lagrangian import margin_lagrangian_hessian
 
             # Kept with the problem, like the margin function: its chain-rule callback is Python.
-            assert self._margin_rows == slice(0, n_nodes)  # the margin rows come first (added first above)
+            if self._margin_rows != slice(0, n_nodes):  # margin_lagrangian_hessian takes them as the first rows
+                raise AssertionError("the margin rows must be the first constraints")
             others = ca.vertcat(*g[1:])
             self._hess_lag = margin_lagrangian_hessian(z, par, cost, others, LAM, margin_model.network)
             opts["hess_lag"] = self._hess_lag

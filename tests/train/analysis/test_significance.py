@@ -302,3 +302,23 @@ def test_sweep_grid_refuses_reports_that_disagree_on_a_run() -> None:
         module.collect_runs([("a.json", first), ("c.json", other_protocol)])
     with pytest.raises(ValueError, match="needs runs of margin weight 0"):
         module.sweep(*module.collect_runs([("d.json", _grid_report({0.1: {0: _metrics(0.0, 5.0)}}))]))
+
+
+def test_stance_scaling_moves_only_the_feet_sideways() -> None:
+    """bench_margin_stance_width: the stance width of lambda (envs.stability_input.stance_width, computed
+    independently) scales by s, the feet's mean lateral position and every other entry stay as they were."""
+    from margin_rl.envs.stability_input import stance_width
+    from margin_rl.robot import load_robot
+    from margin_rl.stability import LAMBDA_SLICES, sample_states
+
+    module = _study("bench_margin_stance_width")
+    lam = sample_states(load_robot("anymal_b"), 16, seed=3)
+    feet = LAMBDA_SLICES["feet"]
+    for scale in (0.8, 1.0, 1.25):
+        scaled = module.with_stance_scaled(lam, scale)
+        before, after = lam[:, feet].reshape(-1, 4, 3), scaled[:, feet].reshape(-1, 4, 3)
+        np.testing.assert_allclose(stance_width(after), scale * stance_width(before), rtol=1e-12)
+        np.testing.assert_allclose(after[:, :, 1].mean(axis=1), before[:, :, 1].mean(axis=1), atol=1e-15)
+        np.testing.assert_array_equal(
+            np.delete(scaled, np.r_[feet][1::3], axis=1), np.delete(lam, np.r_[feet][1::3], axis=1)
+        )

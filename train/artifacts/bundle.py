@@ -201,7 +201,7 @@ def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path,
         "training_sessions": len(sessions),
         "steps_per_s_last_session": progress.get("session_steps_per_s"),
         "learned_margin": margin_model_identity(run_config),
-        # how the run was trained (its first session's command line; a warm start names its source model)
+        # how the run was trained (the command line of its first `train` call; a warm start names its source model)
         "training_command": " ".join(str(part) for part in run_config.get("command", [])) or None,
         "init_from": run_config.get("init_from"),
         "metrics": run["metrics"],

@@ -90,7 +90,7 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from margin_rl.envs.config import EnvConfig, check_int
-from margin_rl.envs.core import AnymalCore
+from margin_rl.envs.core import ACTION_BOUND, AnymalCore
 from margin_rl.envs.observations import observation_size, observation_structure
 from margin_rl.robot import mjcf_names
 
@@ -293,7 +293,7 @@ class AnymalEnv(gymnasium.Env):
         self.core = AnymalCore(self.config, num_envs=1, autoreset=False, truncate=True)
         self.metadata = {**self.metadata, "render_modes": available_render_modes(), "render_fps": round(1.0 / self.dt)}
         self.observation_space = spaces.Box(-np.inf, np.inf, (observation_size(),), np.float32)
-        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
+        self.action_space = spaces.Box(-ACTION_BOUND, ACTION_BOUND, (ACTION_SIZE,), np.float32)
         self.observation_structure = observation_structure()
         self.render_mode, self.width, self.height = render_mode, width, height
         self._frames = FrameRenderer(self.core, width, height)

@@ -63,6 +63,7 @@ from margin_rl.robot import mjcf_names as names
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, StabilityState
 
 __all__ = [
+    "ACTION_BOUND",
     "MARGIN_CLIP",
     "AnymalCore",
     "SimulationState",
@@ -70,6 +71,10 @@ __all__ = [
     "heading_rotation",
     "lambda_from_simulation",
 ]
+
+ACTION_BOUND = 1.0
+"""Half-width of the action box: actions are clipped to [-ACTION_BOUND, ACTION_BOUND]^12, then scaled by
+``EnvConfig.action_scale`` into joint-position offsets [rad] from the standing keyframe."""
 
 MARGIN_CLIP: tuple[float, float] = (-0.5, 0.5)
 """Range [m] the margin term is clipped to (the learned model extrapolates outside its data)."""
@@ -323,7 +328,7 @@ class AnymalCore:
             raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {a.shape}")
         if not np.all(np.isfinite(a)):
             raise ValueError("actions contain NaN or inf")
-        a = np.clip(a, -1.0, 1.0)
+        a = np.clip(a, -ACTION_BOUND, ACTION_BOUND)
         self.physics.ctrl[:] = self._key_ctrl + self.config.action_scale * a
         self._apply_pushes()
         return a

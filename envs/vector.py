@@ -65,7 +65,7 @@ from margin_rl.envs.anymal import (
     make_config,
 )
 from margin_rl.envs.config import EnvConfig, check_int
-from margin_rl.envs.core import AnymalCore
+from margin_rl.envs.core import ACTION_BOUND, AnymalCore
 from margin_rl.envs.observations import observation_size, observation_structure
 
 AUTORESET_MODES: tuple[AutoresetMode, ...] = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
@@ -165,7 +165,7 @@ class AnymalVectorEnv(VectorEnv):
         self.render_mode, self.width, self.height = render_mode, width, height
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt), "autoreset_mode": self.autoreset_mode}
         self.single_observation_space = spaces.Box(-np.inf, np.inf, (observation_size(),), np.float32)
-        self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
+        self.single_action_space = spaces.Box(-ACTION_BOUND, ACTION_BOUND, (ACTION_SIZE,), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.observation_structure = observation_structure()

@@ -22,6 +22,7 @@ from typing import Any
 
 import gymnasium
 
+from margin_rl.envs.anymal import ACTION_SIZE as ACTION_SIZE  # re-exported: the backends and analyses take it from here
 from margin_rl.envs.anymal import make_config
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.core import AnymalCore
@@ -30,7 +31,6 @@ from margin_rl.stability.learned.model import LearnedMargin, WeightsError
 from margin_rl.train.config import apply_overrides
 
 DEFAULT_ENV = "margin_rl/AnymalB-v1"
-ACTION_SIZE = 12
 SB3_EXAMPLE = "examples/train_slip_hopper.py"
 """The repository's example of plain Stable-Baselines3 on another Gymnasium environment (the SLIP hopper)."""
 

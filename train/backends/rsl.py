@@ -11,7 +11,9 @@ the SB3 backend's). :func:`make_rsl_env` builds one from a registered id.
 PPO itself is rsl-rl's. :class:`CheckpointingRunner` only changes where and how checkpoints are written
 (``<run>/checkpoints/ckpt_<steps>.pt`` via a temporary file, with the training config, the progress and the
 random-number states inside), and hooks the runner's per-iteration logger call to advance the progress bar
-and to stop at an iteration boundary when a stop is requested (SIGINT/SIGTERM).
+and to stop at an iteration boundary when a stop is requested (SIGINT/SIGTERM). It also follows the policy's
+mean action std (:class:`~margin_rl.train.exploration.ExplorationMonitor`: a warning on stderr the first time it
+exceeds the action bound) and records its last value in every checkpoint (``infos["action_std"]``).
 
 Warm start (``init_from``): a new run begins with the actor and critic (with their normalisers) of a trained model
 of the same sizes; everything else is the new run's.
@@ -42,6 +44,7 @@ from margin_rl.atomic import atomic_write
 from margin_rl.envs.core import AnymalCore
 from margin_rl.train.config import to_dict
 from margin_rl.train.environments import ACTION_SIZE, AnymalTarget, anymal_config, make_core
+from margin_rl.train.exploration import ExplorationMonitor
 from margin_rl.train.metrics import EpisodeStatistics, step_tags, tensorboard_tags
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
@@ -186,6 +189,7 @@ class CheckpointingRunner(OnPolicyRunner):
         self.steps_per_iteration = env.num_envs * int(train_cfg["num_steps_per_env"])
         self._logger_log = self.logger.log
         self.logger.log = self._after_iteration  # the runner calls this once per iteration, after the update
+        self.exploration = ExplorationMonitor()
 
     @property
     def obs_dim(self) -> int:
@@ -201,6 +205,7 @@ class CheckpointingRunner(OnPolicyRunner):
         with quiet_stdout(not self.hooks.verbose):
             self._logger_log(**kwargs)
         self.completed_iterations = int(kwargs["it"]) + 1
+        self.exploration.update(float(kwargs["action_std"].detach().mean()), self.env_steps)
         rewards = self.logger.rewbuffer
         self.hooks.progress(self.env_steps, statistics.mean(rewards) if rewards else None)
         if self.hooks.stop_requested():
@@ -220,6 +225,7 @@ class CheckpointingRunner(OnPolicyRunner):
             "train_cfg": copy.deepcopy(self.cfg),
             "obs_dim": self.obs_dim,
             "num_actions": int(self.adapter.num_actions),
+            "action_std": self.exploration.last_mean_std,  # mean over the actions, after the last update
             "torch_rng_state": torch.get_rng_state(),
             "numpy_rng_state": self.adapter.core.rng.bit_generator.state,
         }

@@ -43,7 +43,7 @@ from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.vec_env import VecEnv
 
 from margin_rl.atomic import atomic_write
-from margin_rl.envs.core import AnymalCore
+from margin_rl.envs.core import ACTION_BOUND, AnymalCore
 from margin_rl.train.config import Sb3PPOConfig
 from margin_rl.train.environments import (
     ACTION_SIZE,
@@ -52,6 +52,7 @@ from margin_rl.train.environments import (
     make_core,
     observation_size,
 )
+from margin_rl.train.exploration import ExplorationMonitor
 from margin_rl.train.metrics import EpisodeStatistics, split_episodes, step_tags, tensorboard_tags
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
@@ -77,7 +78,7 @@ class Sb3VecEnv(VecEnv):
         self.core = core
         self.render_mode: str | None = None  # read by VecEnv.__init__ through get_attr
         obs_space = spaces.Box(-np.inf, np.inf, (observation_size(core),), np.float32)
-        act_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), np.float32)
+        act_space = spaces.Box(-ACTION_BOUND, ACTION_BOUND, (ACTION_SIZE,), np.float32)
         self.stats = EpisodeStatistics(core.num_envs, core.dt)
         self.last_info: dict[str, np.ndarray] = {}
         self.stats_finished: dict[str, np.ndarray] = {}  # metrics of the episodes that ended at the last step
@@ -211,6 +212,7 @@ class TrainingCallback(BaseCallback):
         self._clock_steps = 0
         self._collect_start = self._clock
         self._recent: float | None = None
+        self.exploration = ExplorationMonitor()
 
     def _on_training_start(self) -> None:
         steps = self.model.num_timesteps
@@ -228,6 +230,9 @@ class TrainingCallback(BaseCallback):
 
     def _on_rollout_start(self) -> None:
         steps = self.model.num_timesteps
+        log_std = getattr(self.model.policy, "log_std", None)  # the Gaussian policy's state-independent log std
+        if log_std is not None:
+            self.exploration.update(float(log_std.detach().exp().mean()), steps)
         stop = self.hooks.stop_requested()
         if steps > self.last_saved and (steps >= self._next or stop):
             self.save_checkpoint()

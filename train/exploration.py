@@ -9,8 +9,9 @@ standing pose, and the deterministic policy that is evaluated (a = μ) is one th
 Penalties that make noise costly (action rate, torques, joint accelerations in legged_gym's reward, whose
 actions are clipped at ±100 rather than ±1) hold σ down there; the paper's reward has none.
 
-:class:`ExplorationMonitor` follows the mean σ over the training and reports, once, when it first exceeds the
-bound; the backends record the last mean σ in every checkpoint (``infos["action_std"]``).
+:class:`ExplorationMonitor` follows the mean σ over the training and reports, once, when more than half of the
+samples of that σ would be clipped (σ > 1.48 × the bound); the rsl backend records the last mean σ in every
+checkpoint (``infos["action_std"]``).
 """
 
 from __future__ import annotations
@@ -39,9 +40,14 @@ def clipped_fraction(std: float, bound: float = ACTION_BOUND) -> float:
     return math.erfc(bound / (std * math.sqrt(2.0)))
 
 
+CLIPPED_SHARE_LIMIT = 0.5
+"""The monitor reports a mean σ whose zero-mean samples fall outside the bound more often than this: σ above
+bound / Φ⁻¹(0.75) ≈ 1.48 × bound. (σ = 1, the usual initial value, clips 32 %.)"""
+
+
 @dataclass(frozen=True)
 class NoiseReport:
-    """The first training iteration whose mean action std exceeded the bound."""
+    """The first training iteration whose mean action std clipped more than :data:`CLIPPED_SHARE_LIMIT`."""
 
     env_steps: int
     mean_std: float
@@ -50,10 +56,11 @@ class NoiseReport:
     def message(self) -> str:
         return (
             f"the policy's mean action-noise std is {self.mean_std:.2f} after {self.env_steps:,} environment steps, "
-            f"above the action bound {ACTION_BOUND:g}: about {self.clipped_fraction:.0%} of its sampled actions are "
-            "clipped, so the entropy bonus raises the std at no cost and the trained (stochastic) policy drifts away "
-            "from the deterministic one that is evaluated. Lower the entropy bonus (--ppo-option entropy_coef=0 for "
-            "rsl, ent_coef for sb3) or add a term that makes action noise costly (action_rate, torques)"
+            f"against the action bound {ACTION_BOUND:g}: at least {self.clipped_fraction:.0%} of its sampled actions "
+            "are clipped, so the entropy bonus raises the std at no cost and the trained (stochastic) policy drifts "
+            "away from the deterministic one that is evaluated. Lower the entropy bonus (--ppo-option "
+            "entropy_coef=0 for rsl, ent_coef for sb3) or add a term that makes action noise costly (action_rate, "
+            "torques)"
         )
 
 
@@ -63,7 +70,8 @@ def print_warning(report: NoiseReport) -> None:
 
 
 class ExplorationMonitor:
-    """Tracks the mean action std per training iteration; calls ``warn`` once when it first exceeds ``bound``."""
+    """Tracks the mean action std per training iteration; calls ``warn`` once, at the first value whose samples
+    are clipped more often than :data:`CLIPPED_SHARE_LIMIT` at ``bound``."""
 
     def __init__(self, warn: Callable[[NoiseReport], None] = print_warning, bound: float = ACTION_BOUND) -> None:
         if not (bound > 0 and math.isfinite(bound)):
@@ -74,11 +82,13 @@ class ExplorationMonitor:
         self.report: NoiseReport | None = None
 
     def update(self, mean_std: float, env_steps: int) -> None:
-        """Record this iteration's mean std (over the actions); warn at the first value above the bound."""
+        """Record this iteration's mean std (over the actions); warn at the first value that clips too often."""
         mean_std = float(mean_std)
         if not math.isfinite(mean_std) or mean_std < 0:
             raise ValueError(f"mean action std must be a finite number >= 0, got {mean_std!r}")
         self.last_mean_std = mean_std
-        if self.report is None and mean_std > self.bound:
-            self.report = NoiseReport(int(env_steps), mean_std, clipped_fraction(mean_std, self.bound))
-            self.warn(self.report)
+        if self.report is None and mean_std > 0:
+            share = clipped_fraction(mean_std, self.bound)
+            if share > CLIPPED_SHARE_LIMIT:
+                self.report = NoiseReport(int(env_steps), mean_std, share)
+                self.warn(self.report)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy.stats import norm
 
 from margin_rl.envs.core import ACTION_BOUND
-from margin_rl.train.exploration import ExplorationMonitor, NoiseReport, clipped_fraction
+from margin_rl.train.exploration import CLIPPED_SHARE_LIMIT, ExplorationMonitor, NoiseReport, clipped_fraction
 from tests.train.conftest import tiny_args
 
 
@@ -54,16 +54,26 @@ def test_bad_std_or_bound_is_refused(bad: float) -> None:
         ExplorationMonitor(bound=bad)
 
 
-def test_the_monitor_warns_once_at_the_first_std_above_the_bound() -> None:
+def test_the_limit_is_half_of_the_samples_clipped() -> None:
+    assert clipped_fraction(1.48) < CLIPPED_SHARE_LIMIT < clipped_fraction(1.49)
+    reports: list[NoiseReport] = []
+    monitor = ExplorationMonitor(warn=reports.append, bound=2.0)  # the limit scales with the bound
+    monitor.update(2.96, 1)
+    assert not reports
+    monitor.update(2.98, 2)
+    assert len(reports) == 1
+
+
+def test_the_monitor_warns_once_at_the_first_std_that_clips_too_often() -> None:
     reports: list[NoiseReport] = []
     monitor = ExplorationMonitor(warn=reports.append)
-    for steps, std in [(100, 0.9), (200, 1.0), (300, 1.3), (400, 2.5), (500, 0.8)]:
+    for steps, std in [(100, 0.0), (200, 1.0), (300, 1.3), (400, 1.6), (500, 2.5), (600, 0.8)]:
         monitor.update(std, steps)
     assert len(reports) == 1
-    assert reports[0].env_steps == 300 and reports[0].mean_std == 1.3
-    assert reports[0].clipped_fraction == pytest.approx(clipped_fraction(1.3))
+    assert reports[0].env_steps == 400 and reports[0].mean_std == 1.6
+    assert reports[0].clipped_fraction == pytest.approx(clipped_fraction(1.6))
     assert monitor.last_mean_std == 0.8
-    assert "entropy_coef" in reports[0].message() and "1.30" in reports[0].message()
+    assert "entropy_coef" in reports[0].message() and "1.60" in reports[0].message()
     with pytest.raises(ValueError, match="mean action std"):
         monitor.update(math.nan, 600)
 

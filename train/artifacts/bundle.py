@@ -27,11 +27,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from margin_rl.provenance import sha256_file
 from margin_rl.stability.learned.model import LearnedMargin, weights_path
 from margin_rl.train.environments import weights_identity
 from margin_rl.train.metrics import summary_table
-from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, TORCHSCRIPT_FILE, read_json, write_json
+from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, TORCHSCRIPT_FILE, final_model_name, read_json, write_json
 
 BUNDLE_ROOT = Path(__file__).resolve().parents[1] / "bundled"
 CARD_FILE = "card.json"
@@ -183,6 +185,17 @@ def margin_model_identity(run_config: dict[str, Any]) -> dict[str, Any] | None:
     return weights_identity(env.get("margin_weights") or env["robot"])
 
 
+def final_action_std(run_dir: Path) -> float | None:
+    """The mean action-noise std an rsl-rl run ended with (``infos["action_std"]`` of its final model), or None
+    for an SB3 run or a model saved before checkpoints recorded it (see :mod:`margin_rl.train.exploration`)."""
+    final = run_dir / final_model_name("rsl")
+    if not final.is_file():
+        return None
+    infos = torch.load(final, map_location="cpu", weights_only=True).get("infos", {})
+    value = infos.get("action_std")
+    return None if value is None else float(value)
+
+
 def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path, Path, dict[str, Any]]:
     """(TorchScript file, config.json, training facts) of one compare run; clear error when unfinished."""
     run_dir = Path(run["run_dir"])
@@ -200,6 +213,7 @@ def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path,
         "env_steps": progress.get("env_steps"),
         "training_sessions": len(sessions),
         "steps_per_s_last_session": progress.get("session_steps_per_s"),
+        "final_action_std": final_action_std(run_dir),
         "learned_margin": margin_model_identity(run_config),
         # how the run was trained (the command line of its first `train` call; a warm start names its source model)
         "training_command": " ".join(str(part) for part in run_config.get("command", [])) or None,

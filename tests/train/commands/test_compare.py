@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+import torch
 
 from margin_rl.train.artifacts.bundle import card_markdown
 from margin_rl.train.commands.compare import main
@@ -114,6 +115,11 @@ def test_bundle_round_trip_evaluates_like_the_runs(tmp_path: Path, toy_weights: 
     assert all(e["learned_margin"]["source"] == str(weights) for e in card["policies"])  # margin weights recorded
     assert card["learned_margin_weights"]["npz_sha256"] == trained_sha  # ... and carried
     assert bundle.margin_weights is not None and bundle.margin_weights.parent.parent == bundle_dir
+    report = json.loads((out / "compare.json").read_text())["variants"]
+    for entry in card["policies"]:  # the action std each run ended with, as its final model recorded it
+        run_dir = next(Path(r["run_dir"]) for r in report[entry["variant"]]["runs"] if r["seed"] == entry["seed"])
+        saved = torch.load(run_dir / "final_model.pt", weights_only=True)["infos"]["action_std"]
+        assert entry["final_action_std"] == pytest.approx(saved) and 0.5 < saved < 1.5
 
     evaluated = tmp_path / "evaluated"
     assert main(["--bundled", str(bundle_dir), "--out", str(evaluated)]) == 0

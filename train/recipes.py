@@ -17,7 +17,12 @@ The recipe's name is written into the run's ``config.json``.
   the edges), floor friction 0.3–1.25 per episode, base mass ±5 kg (±30 % of ANYmal B's MJCF base of 16.8 kg,
   ±26 % of C's 19.2 kg; the evaluation's ±20 % inside), random horizontal pushes of 150 N for 0.2 s (30 N s,
   about 0.85 m/s on ANYmal B) every 8 s on average, the usual reset noise, and 512 environments (a 12,288-step
-  batch, and a third less update time per step than 128 on this CPU: BENCHMARKS "Training throughput").
+  batch, and a third less update time per step than 128 on this CPU: BENCHMARKS "Training throughput"), and no
+  entropy bonus (rsl ``entropy_coef`` 0, sb3 ``ent_coef`` 0): with actions clipped to [-1, 1] and no reward term
+  that makes noise costly, legged_gym's bonus of 0.01 let the action std grow from 1.0 to 2.5-3.6 in every run
+  (three quarters of the sampled actions clipped), and without it the baselines track better and fall less
+  (BENCHMARKS "The action noise", :mod:`margin_rl.train.exploration`). Runs trained before this change record
+  ``entropy_coef`` 0.01 in their ``config.json``.
 """
 
 from __future__ import annotations
@@ -28,12 +33,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from margin_rl.envs.config import CommandConfig, RandomizationConfig
+from margin_rl.train.config import BACKENDS
 
 
 @dataclass(frozen=True)
 class TrainingRecipe:
     """One recipe (see the module docstring). ``env_options`` are EnvConfig field overrides (the configs
-    themselves, or mappings for ``reward_params``), ``ppo_options`` PPO config field overrides."""
+    themselves, or mappings for ``reward_params``), ``ppo_options`` PPO config field overrides per backend (the
+    backends name their fields differently: rsl ``entropy_coef``, sb3 ``ent_coef``)."""
 
     name: str
     summary: str
@@ -41,13 +48,19 @@ class TrainingRecipe:
     num_envs: int
     total_steps: int
     margin_weight: float  # the margin variant's weight; the baseline's is 0
-    ppo_options: Mapping[str, Any] = field(default_factory=dict)
+    ppo_options: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)  # backend -> field -> value
 
     def __post_init__(self) -> None:
         for name in ("num_envs", "total_steps"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ValueError(f"TrainingRecipe {self.name!r}: {name} must be an int >= 1, got {value!r}")
+        unknown = set(self.ppo_options) - set(BACKENDS)
+        if unknown:
+            raise ValueError(
+                f"TrainingRecipe {self.name!r}: ppo_options are keyed by backend {list(BACKENDS)}, "
+                f"got {sorted(unknown)}"
+            )
         if not self.margin_weight > 0:
             raise ValueError(
                 f"TrainingRecipe {self.name!r}: margin_weight is the margin variant's weight, > 0; "
@@ -58,9 +71,11 @@ class TrainingRecipe:
         """A fresh copy of the environment options (callers may add to it)."""
         return copy.deepcopy(dict(self.env_options))
 
-    def ppo_overrides(self) -> dict[str, Any]:
-        """A fresh copy of the PPO options."""
-        return copy.deepcopy(dict(self.ppo_options))
+    def ppo_overrides(self, backend: str) -> dict[str, Any]:
+        """A fresh copy of the PPO options for ``backend`` ("rsl" or "sb3"; none given: {})."""
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown backend {backend!r}; the backends are {list(BACKENDS)}")
+        return copy.deepcopy(dict(self.ppo_options.get(backend, {})))
 
 
 _KNEE_TERM = {"alive_bonus": 0.1, "knee_clearance": 5.0}
@@ -78,7 +93,8 @@ RECIPES: dict[str, TrainingRecipe] = {
         ),
         TrainingRecipe(
             name="robust",
-            summary="commands 0.2-1.1 m/s, friction 0.3-1.25, base mass +-5 kg, pushes 30 N s every 8 s, 512 envs",
+            summary="commands 0.2-1.1 m/s, friction 0.3-1.25, base mass +-5 kg, pushes 30 N s every 8 s, 512 envs, "
+            "no entropy bonus",
             env_options={
                 "reward_params": dict(_KNEE_TERM),
                 "command": CommandConfig(forward_velocity=(0.2, 1.1)),
@@ -93,6 +109,7 @@ RECIPES: dict[str, TrainingRecipe] = {
             num_envs=512,
             total_steps=10_000_000,
             margin_weight=0.2,
+            ppo_options={"rsl": {"entropy_coef": 0.0}, "sb3": {"ent_coef": 0.0}},
         ),
     )
 }

@@ -70,3 +70,30 @@ def test_bad_recipes_are_clear_errors(capsys: pytest.CaptureFixture[str]) -> Non
         TrainingRecipe("x", "", {}, num_envs=1, total_steps=1, margin_weight=0.0)
     with pytest.raises(ValueError, match="unknown training recipe"):
         train_module.TrainSpec(recipe="fast")
+
+
+@pytest.mark.parametrize(("backend", "field"), [("rsl", "entropy_coef"), ("sb3", "ent_coef")])
+def test_robust_recipe_trains_without_an_entropy_bonus_on_both_backends(backend: str, field: str) -> None:
+    spec = _spec("--recipe", "robust", "--backend", backend)
+    assert getattr(spec.ppo, field) == 0.0
+    assert getattr(_spec("--backend", backend).ppo, field) == 0.01  # the backend default stays legged_gym's
+    given = _spec("--recipe", "robust", "--backend", backend, "--ppo-option", f"{field}=0.005")
+    assert getattr(given.ppo, field) == 0.005  # an option given replaces the recipe's
+    assert train_module.TrainSpec.from_json(spec.to_json()) == spec
+
+
+def test_compare_trains_its_runs_with_the_recipes_ppo_options() -> None:
+    from margin_rl.train.commands import compare
+
+    settings = compare.CompareSettings(env_id="margin_rl/AnymalB-v1", backend="rsl", recipe="robust")
+    assert compare._run_spec(settings, 0.0, 0, {}).ppo.entropy_coef == 0.0
+    plain = compare.CompareSettings(env_id="margin_rl/AnymalB-v1", backend="rsl")
+    assert compare._run_spec(plain, 0.0, 0, {}).ppo.entropy_coef == 0.01
+
+
+def test_recipe_ppo_options_are_keyed_by_backend() -> None:
+    with pytest.raises(ValueError, match=r"keyed by backend \['rsl', 'sb3'\], got \['entropy_coef'\]"):
+        TrainingRecipe("x", "", {}, num_envs=1, total_steps=1, margin_weight=0.2, ppo_options={"entropy_coef": 0.0})
+    with pytest.raises(ValueError, match="unknown backend 'jax'"):
+        get_recipe("robust").ppo_overrides("jax")
+    assert get_recipe("fixed_command").ppo_overrides("rsl") == {}

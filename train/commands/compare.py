@@ -10,7 +10,8 @@ For the ANYmal ids, ``--margin-weight`` defaults to 0.2 and ``--env-option rewar
 both variants: the shipped experiment (see :mod:`margin_rl.train.commands.options`).
 
 ``--recipe NAME`` trains both variants with a training recipe of :mod:`margin_rl.train.recipes` (its environment
-options, environments, steps and margin weight; options given here replace the recipe's), e.g. ``--recipe robust``.
+options, environments, steps, PPO options and margin weight; options given here replace the recipe's), e.g.
+``--recipe robust``.
 
 For each variant (margin weight 0, and ``--margin-weight``) and each training seed, a run is trained into
 ``<out>/runs/mw<weight>__s<seed>`` (a finished run is reused, a stopped one resumed), then evaluated on the same
@@ -143,7 +144,7 @@ def _run_spec(settings: CompareSettings, weight: float, seed: int, overrides: di
         settings.env_id,
         settings.backend,
         {**overrides, "margin_weight": weight},
-        None,
+        get_recipe(settings.recipe).ppo_overrides(settings.backend) if settings.recipe is not None else None,
         seed=seed,
         num_envs=settings.num_envs,
         total_steps=settings.total_steps,

@@ -574,7 +574,7 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
     if recipe is not None:
         overrides = with_recipe(recipe, overrides)
         overrides.setdefault("margin_weight", recipe.margin_weight)
-        ppo_overrides = {**recipe.ppo_overrides(), **ppo_overrides}
+        ppo_overrides = {**recipe.ppo_overrides(backend), **ppo_overrides}
     overrides = cli.with_training_defaults(env_id, overrides)
     spec = make_spec(env_id, backend, overrides, ppo_overrides, **run)
     if spec.init_from is not None:

@@ -79,7 +79,7 @@ def test_the_monitor_warns_once_at_the_first_std_that_clips_too_often() -> None:
 
 
 @pytest.mark.parametrize("backend", ["rsl", "sb3"])
-def test_training_with_noise_above_the_bound_warns_and_rsl_records_the_std(
+def test_training_with_noise_that_clips_most_actions_warns_and_rsl_records_the_std(
     backend: str, toy_weights: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     from margin_rl.train.commands.train import main

@@ -13,7 +13,8 @@ PPO itself is rsl-rl's. :class:`CheckpointingRunner` only changes where and how 
 random-number states inside), and hooks the runner's per-iteration logger call to advance the progress bar
 and to stop at an iteration boundary when a stop is requested (SIGINT/SIGTERM). It also follows the policy's
 mean action std (:class:`~margin_rl.train.exploration.ExplorationMonitor`: a warning on stderr the first time it
-exceeds the action bound) and records its last value in every checkpoint (``infos["action_std"]``).
+would clip more than half of the sampled actions) and records its last value in every checkpoint
+(``infos["action_std"]``).
 
 Warm start (``init_from``): a new run begins with the actor and critic (with their normalisers) of a trained model
 of the same sizes; everything else is the new run's.

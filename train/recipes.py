@@ -21,7 +21,8 @@ The recipe's name is written into the run's ``config.json``.
   entropy bonus (rsl ``entropy_coef`` 0, sb3 ``ent_coef`` 0): with actions clipped to [-1, 1] and no reward term
   that makes noise costly, legged_gym's bonus of 0.01 let the action std grow from 1.0 to 2.5-3.6 in every run
   (three quarters of the sampled actions clipped); without it ANYmal B's baselines track the command two to three
-  times more closely and fall no more often, and its margin variant falls at most 7 of 64 times in any cell (was 56)
+  times more closely and fall less often overall, and its margin variant falls at most 7 of 64 times in any cell
+  (up to 56 before)
   (BENCHMARKS "The action noise", :mod:`margin_rl.train.exploration`). Runs trained before this change record
   ``entropy_coef`` 0.01 in their ``config.json``.
 """

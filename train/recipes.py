@@ -22,9 +22,8 @@ The recipe's name is written into the run's ``config.json``.
   that makes noise costly, legged_gym's bonus of 0.01 let the action std grow from 1.0 to 2.5-3.6 in every run
   (three quarters of the sampled actions clipped); without it ANYmal B's baselines track the command two to three
   times more closely and fall less often overall, and its margin variant falls at most 7 of 64 times in any cell
-  (up to 56 before)
-  (BENCHMARKS "The action noise", :mod:`margin_rl.train.exploration`). Runs trained before this change record
-  ``entropy_coef`` 0.01 in their ``config.json``.
+  (up to 56 before; BENCHMARKS "The action noise", :mod:`margin_rl.train.exploration`). Runs trained before this
+  change record ``entropy_coef`` 0.01 in their ``config.json``.
 """
 
 from __future__ import annotations

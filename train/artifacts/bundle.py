@@ -335,11 +335,16 @@ def card_markdown(card: dict[str, Any]) -> str:
         "",
     ]
     lines += summary_table(card["table"])
-    lines += ["", "| policy | margin weight | seed | env steps | sha256 (first 12) |", "|---|---|---|---|---|"]
+    lines += [
+        "",
+        "| policy | margin weight | seed | env steps | final action std | sha256 (first 12) |",
+        "|---|---|---|---|---|---|",
+    ]
     for e in card["policies"]:
         steps = f"{e['env_steps']:,}" if e.get("env_steps") is not None else "?"
+        std = f"{e['final_action_std']:.3f}" if e.get("final_action_std") is not None else "not recorded"
         digest = e["policy_sha256"][:12]
-        lines.append(f"| `{e['policy']}` | {e['margin_weight']:g} | {e['seed']} | {steps} | {digest} |")
+        lines.append(f"| `{e['policy']}` | {e['margin_weight']:g} | {e['seed']} | {steps} | {std} | {digest} |")
     commands = [e for e in card["policies"] if e.get("training_command")]
     if commands and not p.get("trained_here", True):
         lines += ["", "Training commands (each run's `config.json`):", ""]

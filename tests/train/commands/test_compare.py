@@ -72,6 +72,10 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
     assert all(entry["training_command"] is None and entry["init_from"] is None for entry in card["policies"])
     card["policies"][1]["training_command"] = "margin-rl-train --seed 0 --init-from base.pt"
     assert "`with_margin__s0/policy.pt`: `margin-rl-train --seed 0 --init-from base.pt`" in card_markdown(card)
+    std_column = {line.split(" | ")[4] for line in card_text.splitlines() if line.startswith("| `with_margin")}
+    assert std_column == {f"{card['policies'][1]['final_action_std']:.3f}"}  # the card's table shows it too
+    card["policies"][1]["final_action_std"] = None  # an SB3 run, or a model saved before it was recorded
+    assert "| not recorded |" in card_markdown(card)
     assert (
         from_runs["variants"]["with margin"]["runs"][0]["metrics"]
         == report["variants"]["with margin"]["runs"][0]["metrics"]

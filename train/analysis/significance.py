@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from margin_rl.train.analysis.conditions import DEFAULT_CONDITION
 from margin_rl.train.metrics import SUMMARY_METRICS
 
 ALPHA = 0.05
@@ -297,4 +298,46 @@ def difference_table(
             _interval_cell(d),
         ]
         lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
+GRID_METRICS: tuple[tuple[str, str], ...] = (
+    ("fell", ".3f"),
+    ("velocity_error_mean", ".3f"),
+    ("lin_acc_rms", ".2f"),
+    ("ang_acc_rms", ".1f"),
+)
+"""Metrics of the grid table (key, format)."""
+GRID_VARIANTS = ("without margin", "with margin")
+"""The grid table's variants, baseline first."""
+
+
+def grid_table(report: dict[str, Any]) -> list[str]:
+    """Markdown lines: one row per evaluation cell (conditions in the settings' order, commands ascending, the main
+    cell among them), per metric both variants' mean over training seeds as "without → with" and Welch's p over
+    seeds of the difference.
+
+    ``report``: a ``compare`` report (its ``settings``, the main cell's ``variants`` and ``statistics``, and
+    ``grid``), or the same keys from a bundle card (:func:`margin_rl.train.artifacts.bundle.card_markdown`)."""
+    s = report["settings"]
+    main = {"condition": DEFAULT_CONDITION, "forward_velocity": s["forward_velocity"], **report}
+    order = list(dict.fromkeys((DEFAULT_CONDITION, *s.get("grid_conditions", ()))))
+    cells = sorted([main, *report["grid"]], key=lambda c: (order.index(c["condition"]), c["forward_velocity"]))
+    header = " | ".join(SUMMARY_METRICS.get(metric, metric) for metric, _ in GRID_METRICS)
+    lines = [
+        "Across evaluation conditions (margin_rl.train.analysis.conditions) and commands, the same policies, "
+        "episodes and seeds: without → with margin, each the mean over training seeds, and Welch's two-sided p over "
+        "seeds of the difference (– with fewer than two seeds per variant).",
+        "",
+        f"| condition | command [m/s] | {header} |",
+        "|---|---|" + "---|" * len(GRID_METRICS),
+    ]
+    for cell in cells:
+        row = f"| {cell['condition']} | {cell['forward_velocity']:g} |"
+        for metric, fmt in GRID_METRICS:
+            means = [cell["variants"].get(name, {}).get("mean", {}).get(metric) for name in GRID_VARIANTS]
+            text = " → ".join("–" if m is None else f"{m:{fmt}}" for m in means)
+            p_value = cell.get("statistics", {}).get(metric, {}).get("p_value")
+            row += f" {text}{'' if p_value is None else f' (p = {p_value:.2g})'} |"
+        lines.append(row)
     return lines

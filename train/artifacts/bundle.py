@@ -2,14 +2,18 @@
 
 A bundle is a folder ``margin_rl/train/bundled/<name>/`` (or any folder given by path)::
 
-    card.json                        compare settings, command, commit, training time, metrics, sha256 per file
+    card.json                        compare settings, command, commit, training time, metrics (the main cell, the
+                                     grid of commands and conditions when evaluated, the differences with their
+                                     tests), sha256 per file, and the earlier versions' tables (``history``)
     CARD.md                          the same for people, with the comparison table
     <variant>__s<seed>/policy.pt     TorchScript deterministic actor (observations -> actions; no pickle)
     <variant>__s<seed>/config.json   the training run's config.json: the environment to evaluate it in
     learned_margin/<robot>.npz/.json the learned-margin weights and card the policies were trained with
 
 ``compare --bundle <dir>`` writes one from a finished comparison; ``compare --bundled <name>`` evaluates one
-(the README's main job). Loading verifies every file against the card's checksums, so a truncated or edited
+(the README's main job). Writing a bundle over an existing one keeps the replaced card's numbers in the new
+card's ``history`` (and CARD.md), newest first, so a retrained bundle still shows what its predecessors measured.
+Loading verifies every file against the card's checksums, so a truncated or edited
 policy is refused instead of silently evaluated. Carrying its own learned-margin weights keeps a bundle
 reproducible when the package's bundled margin weights are retrained: the policies' actions never depend on
 the margin (it is not a policy observation), but their reward did, and the card's margin column is measured
@@ -31,6 +35,7 @@ import torch
 
 from margin_rl.provenance import sha256_file
 from margin_rl.stability.learned.model import LearnedMargin, weights_path
+from margin_rl.train.analysis.significance import grid_table
 from margin_rl.train.environments import weights_identity
 from margin_rl.train.metrics import summary_table
 from margin_rl.train.runs import CONFIG_FILE, PROGRESS_FILE, TORCHSCRIPT_FILE, final_model_name, read_json, write_json
@@ -223,6 +228,63 @@ def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path,
     return policy, config, facts
 
 
+def _variant_table(variants: dict[str, Any]) -> dict[str, Any]:
+    """Per variant its margin weight and the mean and std over training seeds (a report's runs left out)."""
+    return {
+        name: {"margin_weight": v["margin_weight"], "mean": v["mean"], "std": v["std"]} for name, v in variants.items()
+    }
+
+
+def _measured_differences(report: dict[str, Any]) -> dict[str, Any]:
+    """The report's with − without statistics of the main cell and its grid of commands and conditions (each
+    cell's variant table and statistics), the keys a report has."""
+    found: dict[str, Any] = {}
+    if report.get("statistics"):
+        found["statistics"] = report["statistics"]
+    if report.get("grid"):
+        found["grid"] = [
+            {
+                "condition": cell["condition"],
+                "forward_velocity": cell["forward_velocity"],
+                "variants": _variant_table(cell["variants"]),
+                **({"statistics": cell["statistics"]} if cell.get("statistics") else {}),
+            }
+            for cell in report["grid"]
+        ]
+    return found
+
+
+HISTORY_KEYS = ("name", "settings", "env_options", "provenance", "table", "statistics", "grid")
+"""What the card of a replaced bundle passes on to its successor's ``history`` (its policies are gone)."""
+
+
+def card_history(dest: Path) -> list[dict[str, Any]]:
+    """The ``history`` of a bundle about to be written into ``dest``: the card found there (its settings,
+    provenance and measured tables, with the seeds and learned margin of its policies), then that card's own
+    history; empty when ``dest`` holds no bundle card.
+
+    Raises:
+        ValueError: ``dest`` has a card that cannot be read, so its numbers would be lost.
+    """
+    card_file = dest / CARD_FILE
+    if not card_file.is_file():
+        return []
+    try:
+        previous = read_json(card_file)
+        entry = {key: previous[key] for key in HISTORY_KEYS if key in previous}
+        entry["seeds"] = {}
+        for policy in previous["policies"]:
+            entry["seeds"].setdefault(policy["variant"], []).append(policy["seed"])
+        if previous.get("learned_margin_weights"):
+            entry["learned_margin_sha256"] = previous["learned_margin_weights"]["npz_sha256"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ValueError(
+            f"{card_file} cannot be read ({exc!r}): writing a bundle over it would lose its numbers; move the "
+            "folder away or mend its card first"
+        ) from exc
+    return [entry, *previous.get("history", [])]
+
+
 def write_bundle(report: dict[str, Any], dest: str | Path, provenance: dict[str, Any]) -> Path:
     """Copy the TorchScript actors and run configs of a finished ``compare`` report into ``dest``, with a card.
 
@@ -257,12 +319,11 @@ def write_bundle(report: dict[str, Any], dest: str | Path, provenance: dict[str,
             "settings": report["settings"],
             "env_options": report.get("env_options", {}),
             "provenance": provenance,
-            "table": {
-                name: {"margin_weight": v["margin_weight"], "mean": v["mean"], "std": v["std"]}
-                for name, v in report["variants"].items()
-            },
+            "table": _variant_table(report["variants"]),
+            **_measured_differences(report),
             "policies": entries,
             "learned_margin_weights": copy_margin_weights(entries, staging),
+            "history": card_history(dest),
         }
         write_json(staging / CARD_FILE, card)
         (staging / CARD_MARKDOWN).write_text(card_markdown(card))
@@ -335,6 +396,8 @@ def card_markdown(card: dict[str, Any]) -> str:
         "",
     ]
     lines += summary_table(card["table"])
+    if card.get("grid"):
+        lines += ["", *grid_table(_card_report(card))]
     lines += [
         "",
         "| policy | margin weight | seed | env steps | final action std | sha256 (first 12) |",
@@ -349,4 +412,49 @@ def card_markdown(card: dict[str, Any]) -> str:
     if commands and not p.get("trained_here", True):
         lines += ["", "Training commands (each run's `config.json`):", ""]
         lines += [f"- `{e['policy']}`: `{e['training_command']}`" for e in commands]
+    if card.get("history"):
+        lines += [
+            "",
+            "## Earlier versions of this bundle",
+            "",
+            "Newest first; their policies were replaced by the ones above.",
+        ]
+        for earlier in card["history"]:
+            lines += ["", *_history_markdown(earlier)]
     return "\n".join(lines) + "\n"
+
+
+def _card_report(card: dict[str, Any]) -> dict[str, Any]:
+    """A card's measured tables with the keys of a ``compare`` report (for the shared table writers)."""
+    return {
+        "settings": card["settings"],
+        "variants": card["table"],
+        "statistics": card.get("statistics", {}),
+        "grid": card.get("grid", []),
+    }
+
+
+def _history_markdown(earlier: dict[str, Any]) -> list[str]:
+    """One replaced version of a bundle for people: how it was made and what it measured."""
+    s, p = earlier["settings"], earlier.get("provenance", {})
+    seeds = "; ".join(f"{variant}: seeds {sorted(found)}" for variant, found in earlier.get("seeds", {}).items())
+    lines = [
+        f"### Package commit `{str(p.get('commit', '?'))[:12]}`: `{s['env_id']}`, {s['total_steps']:,} steps per run"
+        + (f", recipe `{s['recipe']}`" if s.get("recipe") else "")
+        + (f", environment options `{earlier['env_options']}`" if earlier.get("env_options") else ""),
+        "",
+        f"- command: `{p.get('command', '?')}`",
+        *([f"- {seeds}"] if seeds else []),
+        *(
+            [f"- learned margin sha256 {earlier['learned_margin_sha256'][:12]}"]
+            if earlier.get("learned_margin_sha256")
+            else []
+        ),
+        f"- evaluation: {s['eval_episodes']} deterministic episodes from seed {s['eval_seed']}, command "
+        f"{s['forward_velocity']:g} m/s",
+        "",
+        *summary_table(earlier["table"]),
+    ]
+    if earlier.get("grid"):
+        lines += ["", *grid_table(_card_report(earlier))]
+    return lines

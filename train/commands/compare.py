@@ -68,7 +68,7 @@ from typing import Any
 from margin_rl.provenance import git_commit, sha256_file
 from margin_rl.train.analysis.conditions import CONDITIONS, DEFAULT_CONDITION, check_condition
 from margin_rl.train.analysis.media import plot_accelerations
-from margin_rl.train.analysis.significance import RESAMPLES, compare_variants, difference_table
+from margin_rl.train.analysis.significance import RESAMPLES, compare_variants, difference_table, grid_table
 from margin_rl.train.artifacts.bundle import load_bundle, write_bundle
 from margin_rl.train.commands.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate
 from margin_rl.train.commands.options import (
@@ -361,45 +361,6 @@ def write_markdown(report: dict[str, Any], path: Path) -> Path:
     return path
 
 
-GRID_METRICS: tuple[tuple[str, str], ...] = (
-    ("fell", ".3f"),
-    ("velocity_error_mean", ".3f"),
-    ("lin_acc_rms", ".2f"),
-    ("ang_acc_rms", ".1f"),
-)
-"""Metrics of the grid table (key, format)."""
-GRID_VARIANTS = ("without margin", "with margin")
-"""The grid table's variants, baseline first."""
-
-
-def grid_table(report: dict[str, Any]) -> list[str]:
-    """Markdown lines: one row per evaluation cell (conditions in the settings' order, commands ascending, the main
-    cell among them), per metric both variants' mean over training seeds as "without → with" and Welch's p over
-    seeds of the difference."""
-    s = report["settings"]
-    main = {"condition": DEFAULT_CONDITION, "forward_velocity": s["forward_velocity"], **report}
-    order = list(dict.fromkeys((DEFAULT_CONDITION, *s.get("grid_conditions", ()))))
-    cells = sorted([main, *report["grid"]], key=lambda c: (order.index(c["condition"]), c["forward_velocity"]))
-    header = " | ".join(SUMMARY_METRICS.get(metric, metric) for metric, _ in GRID_METRICS)
-    lines = [
-        "Across evaluation conditions (margin_rl.train.analysis.conditions) and commands, the same policies, "
-        "episodes and seeds: without → with margin, each the mean over training seeds, and Welch's two-sided p over "
-        "seeds of the difference (– with fewer than two seeds per variant).",
-        "",
-        f"| condition | command [m/s] | {header} |",
-        "|---|---|" + "---|" * len(GRID_METRICS),
-    ]
-    for cell in cells:
-        row = f"| {cell['condition']} | {cell['forward_velocity']:g} |"
-        for metric, fmt in GRID_METRICS:
-            means = [cell["variants"].get(name, {}).get("mean", {}).get(metric) for name in GRID_VARIANTS]
-            text = " → ".join("–" if m is None else f"{m:{fmt}}" for m in means)
-            p_value = cell.get("statistics", {}).get(metric, {}).get("p_value")
-            row += f" {text}{'' if p_value is None else f' (p = {p_value:.2g})'} |"
-        lines.append(row)
-    return lines
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="margin-rl-compare", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -437,8 +398,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--eval-conditions",
         nargs="+",
-        choices=[name for name in CONDITIONS if name != DEFAULT_CONDITION],
-        help="also evaluate in these conditions (margin_rl.train.analysis.conditions), at every command",
+        choices=tuple(CONDITIONS),
+        help="also evaluate in these conditions (margin_rl.train.analysis.conditions), at every command; "
+        f"'{DEFAULT_CONDITION}' alone: the commands only (e.g. to evaluate a bundle on fewer cells than its card's)",
     )
     parser.add_argument("--device", default=d.device)
     parser.add_argument("--out", type=Path, help="output folder (default runs/compare__<env>__<backend>)")

@@ -149,6 +149,60 @@ def test_bundle_round_trip_evaluates_like_the_runs(tmp_path: Path, toy_weights: 
         path.write_bytes(original)
 
 
+def test_rewritten_bundle_keeps_the_replaced_cards_numbers(tmp_path: Path, toy_weights: str) -> None:
+    """A bundle written over an existing one carries the replaced card's settings and tables (and its history)
+    into ``history``, newest first; its card holds the grid with each cell's tests; an unreadable card is not
+    overwritten; ``--bundled ... --eval-conditions nominal`` evaluates the commands only."""
+    from margin_rl.train.artifacts.bundle import CARD_FILE, load_bundle
+
+    out, bundle_dir = tmp_path / "cmp", tmp_path / "bundle"
+    common = [
+        "--backend", "rsl", "--num-envs", "8", "--total-steps", "192", "--eval-episodes", "2", "--warmup-s", "0.1",
+        "--margin-weight", "2", "--margin-weights", toy_weights, "--env-option", "episode_length_s=0.4",
+        "--no-progress", "--eval-commands", "1.0",
+    ]  # fmt: skip
+    assert main([*common, "--seeds", "1", "--out", str(out), "--bundle", str(bundle_dir)]) == 0
+    first = json.loads((bundle_dir / CARD_FILE).read_text())
+    assert first["history"] == []
+    assert [(c["condition"], c["forward_velocity"]) for c in first["grid"]] == [("nominal", 1.0)]
+    assert set(first["grid"][0]["variants"]) == {"without margin", "with margin"}
+    assert set(first["statistics"]) == set(SUMMARY_METRICS)
+    assert "| nominal | 1 |" in (bundle_dir / "CARD.md").read_text()  # the grid row, from the card alone
+
+    # a second seed, written over the first bundle
+    assert main([*common, "--seeds", "2", "--out", str(out), "--bundle", str(bundle_dir)]) == 0
+    second = json.loads((bundle_dir / CARD_FILE).read_text())
+    assert len(second["policies"]) == 4 and len(second["history"]) == 1
+    earlier = second["history"][0]
+    assert earlier["table"] == first["table"] and earlier["grid"] == first["grid"]
+    assert earlier["seeds"] == {"without margin": [0], "with margin": [0]}
+    assert earlier["provenance"]["command"] == first["provenance"]["command"]
+    assert earlier["learned_margin_sha256"] == first["learned_margin_weights"]["npz_sha256"]
+    text = (bundle_dir / "CARD.md").read_text()
+    assert "## Earlier versions of this bundle" in text and "without margin: seeds [0]; with margin: seeds [0]" in text
+    assert text.count("| nominal | 1 |") == 2  # the grid of the bundle and of its predecessor
+    load_bundle(bundle_dir)  # the history does not disturb loading
+
+    assert main([*common, "--seeds", "2", "--out", str(out), "--bundle", str(bundle_dir)]) == 0
+    third = json.loads((bundle_dir / CARD_FILE).read_text())
+    assert [len(entry["seeds"]["with margin"]) for entry in third["history"]] == [2, 1]  # newest first
+
+    # a card that cannot be read is not overwritten: its numbers would be lost
+    (bundle_dir / CARD_FILE).write_text("{not json")
+    with pytest.raises(SystemExit):
+        main([*common, "--seeds", "2", "--out", str(out), "--bundle", str(bundle_dir)])
+    assert (bundle_dir / CARD_FILE).read_text() == "{not json"
+    assert not list(tmp_path.glob(".bundle.*"))  # no staging folder left behind
+
+    # a card whose grid has a second condition, evaluated on its commands only
+    third["settings"]["grid_conditions"] = ["friction_0.4"]
+    (bundle_dir / CARD_FILE).write_text(json.dumps(third))
+    few = tmp_path / "few"
+    assert main(["--bundled", str(bundle_dir), "--out", str(few), "--eval-conditions", "nominal"]) == 0
+    cells = [(c["condition"], c["forward_velocity"]) for c in json.loads((few / "compare.json").read_text())["grid"]]
+    assert cells == [("nominal", 1.0)]
+
+
 def test_bundle_refuses_margin_weights_changed_since_training(tmp_path: Path, toy_weights: str) -> None:
     """A bundle must carry the weights its policies were trained with, not whatever the path holds now."""
     from margin_rl.stability.learned.model import save_weights

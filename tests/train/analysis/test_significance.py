@@ -322,3 +322,52 @@ def test_stance_scaling_moves_only_the_feet_sideways() -> None:
         np.testing.assert_array_equal(
             np.delete(scaled, np.r_[feet][1::3], axis=1), np.delete(lam, np.r_[feet][1::3], axis=1)
         )
+
+
+def test_headline_table_reads_a_card_like_the_compare_report_it_was_written_from() -> None:
+    """The committed two-seed ANYmal B pilot report, and the bundle card that report would give (its tables and
+    grid, as ``write_bundle`` stores them): the same flat-ground rows, falls counted over every seed's episodes."""
+    from margin_rl.train.artifacts.bundle import _measured_differences, _variant_table
+
+    module = _study("headline_table")
+    report = json.loads((ROOT / "docs" / "comparison" / "robust_pilot" / "compare_anymal_b.json").read_text())
+    card = {
+        "settings": report["settings"],
+        "table": _variant_table(report["variants"]),
+        **_measured_differences(report),
+        "policies": [
+            {"variant": name, "seed": run["seed"]} for name, v in report["variants"].items() for run in v["runs"]
+        ],
+    }
+    from_report = module.flat_rows("B", module.as_report(report))
+    assert module.flat_rows("B", module.as_report(card)) == from_report
+    assert [row.split(" | ")[1] for row in from_report] == ["0.5", "0.75", "1"]
+    episodes = report["settings"]["eval_episodes"]
+    runs = report["variants"]["with margin"]["runs"]
+    falls = round(sum(run["metrics"]["fell"] for run in runs) * episodes)
+    assert f"→ {falls} / {episodes * len(runs)} |" in from_report[1]
+
+
+def test_headline_push_rows_test_each_impulse_over_seeds() -> None:
+    from scipy import stats
+
+    module = _study("headline_table")
+
+    def policy(survival: list[float]) -> dict:
+        curve = {"direction": "lateral", "forward_velocity": 0.75, "impulses": [30.0, 45.0], "survival": survival}
+        return {"curves": [curve]}
+
+    without, with_margin = [[1.0, 0.5], [0.9, 0.4], [1.0, 0.6]], [[0.5, 0.1], [0.7, 0.0], [0.6, 0.2]]
+    push = {
+        "protocol": {"directions": ["lateral"], "impulses": [30.0, 45.0], "forward_velocities": [0.75]},
+        "variants": {
+            "without margin": {"policies": [policy(s) for s in without]},
+            "with margin": {"policies": [policy(s) for s in with_margin]},
+        },
+    }
+    (row,) = module.push_rows("B", push, 0.75, [30.0, 45.0])
+    cells = row.split(" | ")[2:]
+    for index, cell in enumerate(cells):
+        a, b = [s[index] for s in without], [s[index] for s in with_margin]
+        p_value = stats.ttest_ind(b, a, equal_var=False).pvalue
+        assert cell.startswith(f"{np.mean(a):.2f} → {np.mean(b):.2f} (") and f"{p_value:.2g}" in cell

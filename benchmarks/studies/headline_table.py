@@ -1,0 +1,151 @@
+"""The README's headline tables from measured records: flat ground at every command, and push survival.
+
+Usage (per robot a bundle card or ``compare`` report evaluated with ``--eval-commands``, and a ``push-recovery``
+report)::
+
+    python benchmarks/studies/headline_table.py \\
+        --robot B train/bundled/anymal_b/card.json docs/comparison/robust/push_anymal_b.json \\
+        --robot C train/bundled/anymal_c/card.json docs/comparison/robust/push_anymal_c.json
+
+Prints two Markdown tables. **Flat ground** (the nominal condition): one row per robot and command, the falls of
+both variants as counts over all their episodes (seeds × episodes), then velocity error, base linear and angular
+acceleration RMS as "without → with" means over training seeds, with the relative change and Welch's two-sided p
+over seeds (the ``compare`` report's statistics, recomputed nowhere). **Pushes** at ``--push-command``: one row per
+robot and direction, survival "without → with" (mean over seeds) at each impulse of ``--impulses`` with Welch's p
+over seeds of the per-seed survival (:func:`margin_rl.train.analysis.significance.compare_seeds`). p < 0.05 is
+printed in bold.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from margin_rl.train.analysis.significance import compare_seeds
+
+VARIANTS = ("without margin", "with margin")
+FLAT_METRICS = (("velocity_error_mean", ".3f", False), ("lin_acc_rms", ".2f", True), ("ang_acc_rms", ".0f", True))
+"""(metric, format, show the relative change) of the flat-ground table."""
+
+
+def _p_text(p_value: float | None) -> str:
+    if p_value is None:  # no test: fewer than two seeds, or no variance in either variant
+        return "–"
+    text = f"p = {p_value:.2g}" if p_value >= 0.001 else "p < 0.001"
+    return f"**{text}**" if p_value < 0.05 else text
+
+
+def as_report(data: dict[str, Any]) -> dict[str, Any]:
+    """A ``compare`` report, or a bundle card read as one: settings, main-cell variants and statistics, grid, and
+    the number of training seeds per variant."""
+    if "table" in data and "policies" in data:  # a bundle card (margin_rl.train.artifacts.bundle)
+        seeds: dict[str, int] = {}
+        for policy in data["policies"]:
+            seeds[policy["variant"]] = seeds.get(policy["variant"], 0) + 1
+        variants = data["table"]
+    else:
+        variants = data["variants"]
+        seeds = {name: len(variant["runs"]) for name, variant in variants.items()}
+    return {
+        "settings": data["settings"],
+        "variants": variants,
+        "statistics": data.get("statistics", {}),
+        "grid": data.get("grid", []),
+        "seeds": seeds,
+    }
+
+
+def nominal_cells(report: dict[str, Any]) -> list[dict[str, Any]]:
+    """The nominal-condition cells of a report (the main cell among them), commands ascending."""
+    main = {"condition": "nominal", "forward_velocity": report["settings"]["forward_velocity"], **report}
+    cells = [main, *(c for c in report["grid"] if c["condition"] == "nominal")]
+    return sorted(cells, key=lambda c: c["forward_velocity"])
+
+
+def falls_text(cell: dict[str, Any], seeds: dict[str, int], episodes: int) -> str:
+    """Falls of both variants as "a / n → b / m" over all seeds' episodes (each seed evaluates ``episodes``)."""
+    parts = []
+    for name in VARIANTS:
+        total = episodes * seeds[name]
+        parts.append(f"{round(cell['variants'][name]['mean']['fell'] * total)} / {total}")
+    return " → ".join(parts)
+
+
+def flat_rows(robot: str, report: dict[str, Any]) -> list[str]:
+    episodes = int(report["settings"]["eval_episodes"])
+    rows = []
+    for cell in nominal_cells(report):
+        seeds = report["seeds"][VARIANTS[1]]
+        row = f"| {robot} | {cell['forward_velocity']:g} | {seeds} | {falls_text(cell, report['seeds'], episodes)} |"
+        for metric, fmt, relative in FLAT_METRICS:
+            a, b = (cell["variants"][name]["mean"][metric] for name in VARIANTS)
+            stats = cell["statistics"][metric]
+            change = ""
+            if relative and stats.get("relative") is not None:
+                change = f"{'−' if stats['relative'] < 0 else '+'}{abs(stats['relative']):.0%}, ".replace("%", " %")
+            row += f" {a:{fmt}} → {b:{fmt}} ({change}{_p_text(stats['p_value'])}) |"
+        rows.append(row)
+    return rows
+
+
+def push_rows(robot: str, report: dict[str, Any], command: float, impulses: list[float]) -> list[str]:
+    rows = []
+    for direction in report["protocol"]["directions"]:
+        row = f"| {robot} | {direction} |"
+        for impulse in impulses:
+            per_seed = []
+            for name in VARIANTS:
+                values = []
+                for policy in report["variants"][name]["policies"]:
+                    curve = next(
+                        c
+                        for c in policy["curves"]
+                        if c["direction"] == direction and abs(c["forward_velocity"] - command) < 1e-9
+                    )
+                    values.append(curve["survival"][curve["impulses"].index(impulse)])
+                per_seed.append(values)
+            test = compare_seeds(f"survival at {impulse:g} N s", per_seed[0], per_seed[1], names=VARIANTS)
+            row += f" {test.mean_a:.2f} → {test.mean_b:.2f} ({_p_text(test.p_value)}) |"
+        rows.append(row)
+    return rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument(
+        "--robot",
+        nargs=3,
+        action="append",
+        required=True,
+        metavar=("LABEL", "CARD_OR_COMPARE_JSON", "PUSH_JSON"),
+        help="a robot's label, its bundle card.json or compare.json, and its push_recovery.json",
+    )
+    parser.add_argument("--push-command", type=float, default=0.75, help="command of the push table [m/s]")
+    parser.add_argument("--impulses", type=float, nargs="+", default=[30.0, 45.0, 60.0, 75.0])
+    args = parser.parse_args(argv)
+    loaded = [
+        (label, as_report(json.loads(Path(c).read_text())), json.loads(Path(p).read_text()))
+        for label, c, p in args.robot
+    ]
+    for _, _, push in loaded:
+        missing = [i for i in args.impulses if i not in push["protocol"]["impulses"]]
+        if missing or args.push_command not in push["protocol"]["forward_velocities"]:
+            parser.error(f"--impulses {missing} or --push-command {args.push_command:g} not in a push report")
+    print("| robot | command [m/s] | seeds per variant | falls | velocity error [m/s] | base lin. acc. RMS [m/s²] "
+          "| base ang. acc. RMS [rad/s²] |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|")
+    for label, compare, _ in loaded:
+        print("\n".join(flat_rows(label, compare)))
+    print()
+    impulse_headers = " | ".join(f"{impulse:g} N s" for impulse in args.impulses)
+    print(f"| robot | push at {args.push_command:g} m/s | {impulse_headers} |")
+    print("|---|---|" + "---|" * len(args.impulses))
+    for label, _, push in loaded:
+        print("\n".join(push_rows(label, push, args.push_command, args.impulses)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

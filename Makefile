@@ -40,9 +40,12 @@ install: $(STAMP)
 # robot into results/<bundle>, the comparison table with its statistics, the Fig. 9-style plot and the
 # push-recovery curves (a few minutes on CPU).
 DEMO_BUNDLES ?= anymal_b anymal_c
+# the cards measure 64 episodes per policy and cell in four conditions; the demo, the three commands on flat ground
+DEMO_EPISODES ?= 16
 demo: install
 	@for bundle in $(DEMO_BUNDLES); do \
-	  $(PY) -m margin_rl.train compare --bundled $$bundle --out results/$$bundle || exit 1; \
+	  $(PY) -m margin_rl.train compare --bundled $$bundle --eval-episodes $(DEMO_EPISODES) \
+	    --eval-conditions nominal --out results/$$bundle || exit 1; \
 	  $(PY) -m margin_rl.train push-recovery --bundled $$bundle --episodes 8 --forward-velocities 0.75 \
 	    --out results/$$bundle || exit 1; \
 	done

@@ -185,8 +185,9 @@ def test_every_bundled_config_reads_back_with_its_reward_parameters() -> None:
     for path in configs:
         stored = json.loads(path.read_text())
         config = from_dict(EnvConfig, stored["env_config"], "env_config")
+        stored_params = stored["env_config"].get("reward_params", {})  # v1 configs nest them, v0 ones did not
         for key in LEGACY_FIELDS:  # the oldest bundle predates knee_clearance: the default applies
-            expected = stored["env_config"].get(key, RewardParams()[key])
+            expected = stored_params.get(key, stored["env_config"].get(key, RewardParams()[key]))
             assert config.reward_params[key] == expected, (path, key)
         assert current_env_id(stored["env_id"]) in ANYMAL_ENV_IDS
 

@@ -9,10 +9,10 @@ from margin_rl.train.artifacts.bundle import bundled_names, load_bundle
 from margin_rl.train.artifacts.policies import load_policy
 from margin_rl.train.commands.evaluate import evaluate
 
-SHIPPED = {  # the ids the bundles stored (-v0, read as -v1: margin_rl.registration.current_env_id)
-    "anymal_b_v1": "margin_rl/AnymalB-v0",  # the first comparison (v1 learned margin)
-    "anymal_b": "margin_rl/AnymalB-v0",  # issue 17: v2 learned margin, knee clearance
-    "anymal_c": "margin_rl/AnymalC-v0",
+SHIPPED = {  # the ids the bundles stored (-v0 is read as -v1: margin_rl.registration.current_env_id)
+    "anymal_b_v1": "margin_rl/AnymalB-v0",  # the first comparison (v1 learned margin, one command)
+    "anymal_b": "margin_rl/AnymalB-v1",  # the robust recipe, v2 learned margin
+    "anymal_c": "margin_rl/AnymalC-v1",
 }
 
 
@@ -26,6 +26,20 @@ def test_bundle_is_shipped_with_both_variants_and_several_seeds(name: str, env_i
     assert all(len(policies) >= 3 for _, policies in variants.values())
     assert bundle.card["settings"]["env_id"] == env_id
     assert bundle.card["provenance"]["commit"] not in ("", "unknown")
+
+
+@pytest.mark.parametrize("name", ["anymal_b", "anymal_c"])
+def test_robust_bundle_card_has_every_command_and_the_history_it_replaced(name: str) -> None:
+    """The shipped B and C bundles: five seeds per variant of the robust recipe, evaluated at the three commands
+    in four conditions with each cell's tests, and the fixed-command bundle they replaced kept in ``history``."""
+    card = load_bundle(name).card
+    assert card["settings"]["recipe"] == "robust" and len(card["policies"]) == 10
+    cells = {(cell["condition"], cell["forward_velocity"]) for cell in card["grid"]}
+    assert {("nominal", 0.5), ("nominal", 1.0), ("mass_+20", 0.75)} <= cells and len(cells) == 11
+    assert all("lin_acc_rms" in cell["statistics"] for cell in card["grid"])
+    (earlier,) = card["history"]
+    assert earlier["settings"]["total_steps"] == 5_000_000 and earlier["settings"].get("recipe") is None
+    assert set(earlier["table"]) == {"without margin", "with margin"}
 
 
 @pytest.mark.parametrize("name", sorted(SHIPPED))

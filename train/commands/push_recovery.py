@@ -16,8 +16,9 @@ terminate (base or thigh contact, base too low, tilt; the training environment's
 (episodes that fell before it are counted apart, in ``fell_before_push``); a policy's survival curve is one
 value per impulse, and a variant's is the mean ± std of its policies' (training seeds') curves.
 
-The forward velocities beyond the training command (0.75 m/s in the comparison) give the same curves at commands
-the policies were not trained on.
+Several forward velocities give the same curves at each command; the plot marks a command "trained" (every
+policy was trained at exactly it), "in the training range" or "untrained", from the policies' recorded training
+command ranges.
 
 Outputs in ``--out``: ``push_recovery.json`` (every policy's counts and the variants' mean ± std) and
 ``push_recovery.png`` (survival vs impulse, one panel per direction and command, both variants).
@@ -52,7 +53,7 @@ class PushProtocol:
 
     impulses: tuple[float, ...] = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0)  # [N s]; 15 N s is 0.5 m/s on 30 kg
     directions: tuple[str, ...] = DIRECTIONS
-    forward_velocities: tuple[float, ...] = (0.75, 0.5, 1.0)  # commands [m/s]; the first is the trained one
+    forward_velocities: tuple[float, ...] = (0.75, 0.5, 1.0)  # commands [m/s]
     episodes: int = 16  # per (direction, impulse, command) and policy
     duration_s: float = 0.1  # push duration [s]
     push_window_s: tuple[float, float] = (2.0, 4.0)  # push start, uniform [s after reset]
@@ -107,6 +108,7 @@ class PolicyPushes:
     policy: str
     seed: int  # training seed
     curves: tuple[SurvivalCurve, ...] = field(default_factory=tuple)
+    training_forward_velocity: tuple[float, float] | None = None  # the training command range [m/s], if recorded
 
     def curve(self, direction: str, forward_velocity: float) -> SurvivalCurve:
         for c in self.curves:
@@ -181,7 +183,33 @@ def policy_pushes(
             target = evaluation_target(policy, None, env_overrides, velocity)
             for direction in protocol.directions:
                 curves.append(run_pushes(policy, target, protocol, direction))
-    return PolicyPushes(str(policy_path), seed, tuple(curves))
+    return PolicyPushes(str(policy_path), seed, tuple(curves), training_command_range(policy))
+
+
+def training_command_range(policy: LoadedPolicy) -> tuple[float, float] | None:
+    """The forward-velocity command range [m/s] the policy was trained on (its run's ``config.json``), or None
+    when its file does not record one."""
+    command = ((policy.train_config or {}).get("env_config") or {}).get("command") or {}
+    bounds = command.get("forward_velocity")
+    return None if bounds is None else (float(bounds[0]), float(bounds[-1]))
+
+
+def command_label(report: dict[str, Any], forward_velocity: float) -> str:
+    """How a command relates to the policies' training commands: "trained" (every policy was trained at exactly
+    this command), "in the training range", "untrained" (outside every policy's range), or "" when not recorded
+    or mixed."""
+    ranges = [
+        policy.get("training_forward_velocity")
+        for variant in report["variants"].values()
+        for policy in variant["policies"]
+    ]
+    if not ranges or any(r is None for r in ranges):
+        return ""
+    inside = [low - 1e-9 <= forward_velocity <= high + 1e-9 for low, high in ranges]
+    if all(inside):
+        exact = all(abs(low - forward_velocity) < 1e-9 and abs(high - forward_velocity) < 1e-9 for low, high in ranges)
+        return "trained" if exact else "in the training range"
+    return "untrained" if not any(inside) else ""
 
 
 def variant_survival(results: list[PolicyPushes], direction: str, forward_velocity: float) -> dict[str, list]:
@@ -205,6 +233,7 @@ def push_recovery_report(
                     "policy": r.policy,
                     "seed": r.seed,
                     "curves": [{**asdict(c), "survival": list(c.survival)} for c in r.curves],
+                    "training_forward_velocity": r.training_forward_velocity,
                 }
                 for r in results
             ],
@@ -242,8 +271,8 @@ def plot_push_survival(report: dict[str, Any], path: str | Path, title: str = ""
                 label = f"{name} ({s['n_policies']} seeds)"
                 ax.plot(impulses, mean, "o-", color=COLORS.get(name), label=label, ms=3)
                 ax.fill_between(impulses, mean - std, mean + std, color=COLORS.get(name), alpha=0.2)
-            trained = " (trained)" if row == 0 else ""
-            ax.set_title(f"{direction} push, {v:g} m/s{trained}", fontsize=9)
+            label = command_label(report, v)
+            ax.set_title(f"{direction} push, {v:g} m/s" + (f" ({label})" if label else ""), fontsize=9)
             ax.set_ylim(-0.05, 1.05)
             ax.grid(alpha=0.3)
             if row == len(velocities) - 1:

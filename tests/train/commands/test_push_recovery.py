@@ -155,3 +155,19 @@ def test_command_line_on_a_shipped_bundle(tmp_path: Path) -> None:
     for variant in report["variants"].values():
         assert len(variant["policies"]) == 3
         assert variant["survival"]["lateral@0.75"]["mean"] == [1.0]  # no push: the bundled policies walk on
+        assert all(policy["training_forward_velocity"] == [0.75, 0.75] for policy in variant["policies"])
+
+
+def test_command_label_follows_the_policies_training_commands() -> None:
+    from margin_rl.train.commands.push_recovery import command_label
+
+    def report(*ranges):
+        return {"variants": {"v": {"policies": [{"training_forward_velocity": r} for r in ranges]}}}
+
+    fixed, robust = [0.75, 0.75], [0.2, 1.1]
+    assert command_label(report(fixed, fixed), 0.75) == "trained"
+    assert command_label(report(fixed, fixed), 1.0) == "untrained"
+    assert command_label(report(robust, robust), 0.5) == "in the training range"
+    assert command_label(report(robust, robust), 1.2) == "untrained"
+    assert command_label(report(fixed, robust), 0.5) == ""  # mixed: no single answer
+    assert command_label(report(fixed, None), 0.75) == ""  # a policy that does not record it

@@ -16,9 +16,8 @@ terminate (base or thigh contact, base too low, tilt; the training environment's
 (episodes that fell before it are counted apart, in ``fell_before_push``); a policy's survival curve is one
 value per impulse, and a variant's is the mean ± std of its policies' (training seeds') curves.
 
-Several forward velocities give the same curves at each command; the plot marks a command "trained" (every
-policy was trained at exactly it), "in the training range" or "untrained", from the policies' recorded training
-command ranges.
+Each forward velocity gets its own curves; the plot marks a command "trained" (every policy was trained at
+exactly it), "in the training range" or "untrained", from the policies' recorded training command ranges.
 
 Outputs in ``--out``: ``push_recovery.json`` (every policy's counts and the variants' mean ± std) and
 ``push_recovery.png`` (survival vs impulse, one panel per direction and command, both variants).
@@ -271,8 +270,8 @@ def plot_push_survival(report: dict[str, Any], path: str | Path, title: str = ""
                 label = f"{name} ({s['n_policies']} seeds)"
                 ax.plot(impulses, mean, "o-", color=COLORS.get(name), label=label, ms=3)
                 ax.fill_between(impulses, mean - std, mean + std, color=COLORS.get(name), alpha=0.2)
-            label = command_label(report, v)
-            ax.set_title(f"{direction} push, {v:g} m/s" + (f" ({label})" if label else ""), fontsize=9)
+            relation = command_label(report, v)
+            ax.set_title(f"{direction} push, {v:g} m/s" + (f" ({relation})" if relation else ""), fontsize=9)
             ax.set_ylim(-0.05, 1.05)
             ax.grid(alpha=0.3)
             if row == len(velocities) - 1:

@@ -23,9 +23,11 @@ import json
 from pathlib import Path
 from typing import Any
 
+from margin_rl.train.analysis.conditions import DEFAULT_CONDITION
+from margin_rl.train.analysis.significance import GRID_VARIANTS as VARIANTS
 from margin_rl.train.analysis.significance import compare_seeds
+from margin_rl.train.artifacts.bundle import card_report, policy_seeds
 
-VARIANTS = ("without margin", "with margin")
 FLAT_METRICS = (("velocity_error_mean", ".3f", False), ("lin_acc_rms", ".2f", True), ("ang_acc_rms", ".0f", True))
 """(metric, format, show the relative change) of the flat-ground table."""
 
@@ -41,16 +43,12 @@ def as_report(data: dict[str, Any]) -> dict[str, Any]:
     """A ``compare`` report, or a bundle card read as one: settings, main-cell variants and statistics, grid, and
     the number of training seeds per variant."""
     if "table" in data and "policies" in data:  # a bundle card (margin_rl.train.artifacts.bundle)
-        seeds: dict[str, int] = {}
-        for policy in data["policies"]:
-            seeds[policy["variant"]] = seeds.get(policy["variant"], 0) + 1
-        variants = data["table"]
-    else:
-        variants = data["variants"]
-        seeds = {name: len(variant["runs"]) for name, variant in variants.items()}
+        seeds = {name: len(found) for name, found in policy_seeds(data["policies"]).items()}
+        return {**card_report(data), "seeds": seeds}
+    seeds = {name: len(variant["runs"]) for name, variant in data["variants"].items()}
     return {
         "settings": data["settings"],
-        "variants": variants,
+        "variants": data["variants"],
         "statistics": data.get("statistics", {}),
         "grid": data.get("grid", []),
         "seeds": seeds,
@@ -59,8 +57,8 @@ def as_report(data: dict[str, Any]) -> dict[str, Any]:
 
 def nominal_cells(report: dict[str, Any]) -> list[dict[str, Any]]:
     """The nominal-condition cells of a report (the main cell among them), commands ascending."""
-    main = {"condition": "nominal", "forward_velocity": report["settings"]["forward_velocity"], **report}
-    cells = [main, *(c for c in report["grid"] if c["condition"] == "nominal")]
+    main = {"condition": DEFAULT_CONDITION, "forward_velocity": report["settings"]["forward_velocity"], **report}
+    cells = [main, *(c for c in report["grid"] if c["condition"] == DEFAULT_CONDITION)]
     return sorted(cells, key=lambda c: c["forward_velocity"])
 
 

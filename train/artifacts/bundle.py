@@ -272,9 +272,7 @@ def card_history(dest: Path) -> list[dict[str, Any]]:
     try:
         previous = read_json(card_file)
         entry = {key: previous[key] for key in HISTORY_KEYS if key in previous}
-        entry["seeds"] = {}
-        for policy in previous["policies"]:
-            entry["seeds"].setdefault(policy["variant"], []).append(policy["seed"])
+        entry["seeds"] = policy_seeds(previous["policies"])
         if previous.get("learned_margin_weights"):
             entry["learned_margin_sha256"] = previous["learned_margin_weights"]["npz_sha256"]
     except (ValueError, KeyError, TypeError) as exc:
@@ -361,10 +359,7 @@ def card_markdown(card: dict[str, Any]) -> str:
     if not p.get("trained_here", True):
         timed = "evaluation only: the runs were trained before"
     # the seeds of each variant, from the policies (a --runs comparison may hold more seeds of one variant)
-    seeds: dict[str, list[int]] = {}
-    for e in card["policies"]:
-        seeds.setdefault(e["variant"], []).append(e["seed"])
-    seed_text = "; ".join(f"{variant}: seeds {sorted(found)}" for variant, found in seeds.items())
+    seed_text = _seeds_text(policy_seeds(card["policies"]))
     if p.get("trained_here", True):
         options = f"environment options `{card['env_options']}`"
     else:  # compare --runs: each run's own options, in its training command below and its config.json
@@ -397,7 +392,7 @@ def card_markdown(card: dict[str, Any]) -> str:
     ]
     lines += summary_table(card["table"])
     if card.get("grid"):
-        lines += ["", *grid_table(_card_report(card))]
+        lines += ["", *grid_table(card_report(card))]
     lines += [
         "",
         "| policy | margin weight | seed | env steps | final action std | sha256 (first 12) |",
@@ -424,7 +419,19 @@ def card_markdown(card: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _card_report(card: dict[str, Any]) -> dict[str, Any]:
+def policy_seeds(policies: list[dict[str, Any]]) -> dict[str, list[int]]:
+    """Variant -> its training seeds, ascending, from a card's policy entries (variants in card order)."""
+    seeds: dict[str, list[int]] = {}
+    for policy in policies:
+        seeds.setdefault(policy["variant"], []).append(int(policy["seed"]))
+    return {variant: sorted(found) for variant, found in seeds.items()}
+
+
+def _seeds_text(seeds: dict[str, list[int]]) -> str:
+    return "; ".join(f"{variant}: seeds {found}" for variant, found in seeds.items())
+
+
+def card_report(card: dict[str, Any]) -> dict[str, Any]:
     """A card's measured tables with the keys of a ``compare`` report (for the shared table writers)."""
     return {
         "settings": card["settings"],
@@ -437,7 +444,7 @@ def _card_report(card: dict[str, Any]) -> dict[str, Any]:
 def _history_markdown(earlier: dict[str, Any]) -> list[str]:
     """One replaced version of a bundle for people: how it was made and what it measured."""
     s, p = earlier["settings"], earlier.get("provenance", {})
-    seeds = "; ".join(f"{variant}: seeds {sorted(found)}" for variant, found in earlier.get("seeds", {}).items())
+    seeds = _seeds_text(earlier.get("seeds", {}))
     lines = [
         f"### Package commit `{str(p.get('commit', '?'))[:12]}`: `{s['env_id']}`, {s['total_steps']:,} steps per run"
         + (f", recipe `{s['recipe']}`" if s.get("recipe") else "")
@@ -456,5 +463,5 @@ def _history_markdown(earlier: dict[str, Any]) -> list[str]:
         *summary_table(earlier["table"]),
     ]
     if earlier.get("grid"):
-        lines += ["", *grid_table(_card_report(earlier))]
+        lines += ["", *grid_table(card_report(earlier))]
     return lines

@@ -2,7 +2,7 @@
 
 Usage:
     python benchmarks/studies/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b_v1 \
-        [--policy runs/<run>/policy_torchscript.pt ...] [--num-envs 16] [--steps 250] \
+        [--bundle-seeds 0 1 2] [--policy runs/<run>/policy_torchscript.pt ...] [--num-envs 16] [--steps 250] \
         [--json docs/learned_margin/locomotion_distribution_anymal_b.json] [--figure ...png]
 
 Each policy (every policy of ``--bundle``, both variants, and any ``--policy`` file) walks ``--num-envs``
@@ -107,6 +107,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="anymal_b", choices=sorted(ENV_NAMES))
     parser.add_argument("--bundle", default=None, help="policy bundle (both variants), e.g. anymal_b")
+    parser.add_argument(
+        "--bundle-seeds", type=int, nargs="+", default=None, help="only the bundle's policies of these training seeds"
+    )
     parser.add_argument("--policy", action="append", default=[], help="more policy files (TorchScript, rsl, sb3)")
     parser.add_argument("--num-envs", type=int, default=16)
     parser.add_argument("--steps", type=int, default=250)
@@ -121,7 +124,8 @@ def main() -> None:
     args = parser.parse_args()
     policies = []
     if args.bundle:
-        policies += [(f"{r.variant} s{r.seed}", load_policy(r.policy)) for r in load_bundle(args.bundle).runs]
+        runs = [r for r in load_bundle(args.bundle).runs if args.bundle_seeds is None or r.seed in args.bundle_seeds]
+        policies += [(f"{r.variant} s{r.seed}", load_policy(r.policy)) for r in runs]
     policies += [(Path(p).parent.name, load_policy(p)) for p in args.policy]
     if not policies:
         parser.error("give --bundle or --policy")

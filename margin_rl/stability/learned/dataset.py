@@ -34,6 +34,7 @@ refused rather than mixed.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import multiprocessing
 import os
@@ -46,7 +47,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from margin_rl.atomic import atomic_savez, atomic_write_text
+from margin_rl.atomic import atomic_savez, atomic_write, atomic_write_text
 from margin_rl.provenance import sha256_file
 from margin_rl.robot import available_robots
 from margin_rl.stability.analytic.extended import (
@@ -145,15 +146,20 @@ def shard_path(out: Path, index: int) -> Path:
     return out / f"shard_{index:05d}.npz"
 
 
-def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
-    """Sample, label and write shard ``index``; returns its status counts. Runs in a worker."""
+def shard_states(spec: DatasetSpec, index: int) -> np.ndarray:
+    """The states (k, 47) of shard ``index``: drawn from its own seed, so any machine can draw them again."""
     robot = worker_robot(spec.robot)
     seed = np.random.SeedSequence(spec.seed, spawn_key=(index,))
     if spec.distribution == "rollouts":
         with np.load(spec.states) as recorded:
-            lams = sample_around_states(robot, recorded["lam"], spec.shard_length(index), seed=seed)
-    else:
-        lams = sample_states(robot, spec.shard_length(index), seed=seed, table=DISTRIBUTIONS[spec.distribution])
+            return sample_around_states(robot, recorded["lam"], spec.shard_length(index), seed=seed)
+    return sample_states(robot, spec.shard_length(index), seed=seed, table=DISTRIBUTIONS[spec.distribution])
+
+
+def make_shard(spec: DatasetSpec, index: int, out: Path) -> dict[str, int]:
+    """Sample, label and write shard ``index``; returns its status counts. Runs in a worker."""
+    robot = worker_robot(spec.robot)
+    lams = shard_states(spec, index)
     labels = extended_margin_batch(
         robot, lams, spec.settings, workers=1, penalty=spec.load_penalty, bisection_steps=spec.bisection_steps
     )
@@ -316,6 +322,194 @@ def _log(enabled: bool, message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
+LABEL_FIELDS: tuple[str, ...] = ("margin", "status", "n_lps", "seconds", "extended", "load_fraction", "source")
+"""The per-sample columns of a shard other than ``lam``: what a label pack carries."""
+
+STATE_TOLERANCE = 1e-5
+"""Largest |row sum| difference of a re-drawn shard's states accepted when its checksum differs (float32 rounding
+of another machine's numpy or CPU); a re-drawn state that differs more is refused."""
+
+
+@dataclass(frozen=True)
+class LabelPack:
+    """What :func:`pack_labels` wrote or :func:`unpack_labels` restored."""
+
+    path: Path
+    first_shard: int
+    shards: int
+    samples: int
+    exact_shards: int = 0  # unpack: shards whose re-drawn states are bit-identical to the labelled ones
+    max_row_sum_deviation: float = 0.0  # unpack: largest |row sum| difference over the other shards
+
+
+def spec_from_manifest(manifest: dict, n: int, states: str | None = None) -> DatasetSpec:
+    """The :class:`DatasetSpec` of a manifest, with ``n`` samples (``states``: the rollouts' file on this machine)."""
+    extended = manifest.get("extended_margin", {})
+    return DatasetSpec(
+        robot=manifest["robot"],
+        n=n,
+        shard_size=manifest["shard_size"],
+        seed=manifest["seed"],
+        settings=AnalyticSettings.from_dict(manifest["analytic_settings"]),
+        distribution=manifest.get("distribution", "table_i"),
+        states=states,
+        states_sha256=sha256_file(states) if states else None,
+        load_penalty=extended.get("load_penalty", DEFAULT_LOAD_PENALTY),
+        bisection_steps=extended.get("bisection_steps", DEFAULT_BISECTION_STEPS),
+    )
+
+
+def _row_sums(lam: np.ndarray) -> np.ndarray:
+    return lam.astype(np.float64).sum(axis=1).astype(np.float32)
+
+
+def _lam_checksum(lam: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(lam, dtype=np.float32).tobytes()).hexdigest()
+
+
+def pack_labels(dataset: str | Path, out: str | Path, first_shard: int = 0, max_shards: int | None = None) -> LabelPack:
+    """Write the labels of a dataset's complete shards, without their states, to one compressed ``.npz``.
+
+    A shard's states cost 188 bytes a sample and its labels about 20: where a dataset is labelled on a machine
+    whose results come back through a narrow channel, only the labels travel, and :func:`unpack_labels` draws
+    the states again from the manifest's seeds (:func:`shard_states`). Each shard's state checksum and every
+    state's row sum travel too, so that unpacking proves it drew the states that were labelled.
+
+    The pack holds the consecutive complete shards from ``first_shard`` (at most ``max_shards``); a shard in
+    flight or missing ends it, so a run stopped at any moment packs what it finished.
+    """
+    dataset, out = Path(dataset), Path(out)
+    manifest_path = dataset / MANIFEST
+    if not manifest_path.is_file():
+        raise DatasetError(f"{dataset} is not a margin_rl dataset (no {MANIFEST})")
+    manifest = json.loads(manifest_path.read_text())
+    if manifest.get("format_version") != FORMAT_VERSION:
+        raise DatasetError(f"{dataset}: only format {FORMAT_VERSION} datasets can be packed")
+    size, total = manifest["shard_size"], manifest["n"]
+    if first_shard < 0 or (max_shards is not None and max_shards < 1):
+        raise DatasetError(f"first_shard must be >= 0 and max_shards >= 1, got {first_shard}, {max_shards}")
+    columns: dict[str, list[np.ndarray]] = {name: [] for name in (*LABEL_FIELDS, "row_sum")}
+    checksums: list[str] = []
+    index = first_shard
+    while index * size < total and (max_shards is None or len(checksums) < max_shards):
+        length = min(size, total - index * size)
+        if not _shard_is_complete(shard_path(dataset, index), length):
+            break
+        with np.load(shard_path(dataset, index)) as data:
+            for name in LABEL_FIELDS:
+                columns[name].append(data[name])
+            columns["row_sum"].append(_row_sums(data["lam"]))
+            checksums.append(_lam_checksum(data["lam"]))
+        index += 1
+    if not checksums:
+        raise DatasetError(f"{dataset}: shard {first_shard} is not complete; nothing to pack")
+    atomic_write(
+        out,
+        lambda f: np.savez_compressed(
+            f,
+            manifest=np.array(json.dumps(manifest)),
+            first_shard=np.array(first_shard),
+            lam_sha256=np.array(checksums),
+            **{name: np.concatenate(parts) for name, parts in columns.items()},
+        ),
+    )
+    samples = sum(len(part) for part in columns["margin"])
+    return LabelPack(path=out, first_shard=first_shard, shards=len(checksums), samples=samples)
+
+
+def unpack_labels(
+    pack: str | Path, out: str | Path, states: str | Path | None = None, workers: int = 1, progress: bool = True
+) -> LabelPack:
+    """Restore the shards of a :func:`pack_labels` file into the dataset directory ``out``, drawing their states.
+
+    The dataset's manifest is the packed one with ``n`` covering the packed shards, so the directory is what
+    ``generate`` would have written here (its command is recorded); packs of one dataset unpack into the same
+    directory in the order of their shards. A ``rollouts`` dataset needs ``states``, the recorded states it was
+    drawn around (the same file: its checksum is compared). A re-drawn shard must match its checksum, or, where
+    another machine's floating point rounds differently, every state's row sum within :data:`STATE_TOLERANCE`;
+    otherwise the shard is refused (nothing is written for it) with the deviation it found.
+    """
+    pack, out = Path(pack), Path(out)
+    with np.load(pack) as data:
+        manifest = json.loads(str(data["manifest"]))
+        first = int(data["first_shard"])
+        checksums = [str(c) for c in data["lam_sha256"]]
+        columns = {name: data[name] for name in (*LABEL_FIELDS, "row_sum")}
+    size = manifest["shard_size"]
+    n = min(manifest["n"], (first + len(checksums)) * size)
+    existing = Path(out) / MANIFEST
+    if existing.is_file():  # a later pack of the same dataset was restored first: keep its larger n
+        n = max(n, int(json.loads(existing.read_text()).get("n", 0)))
+    spec = spec_from_manifest(manifest, n, str(states) if states is not None else None)
+    if spec.states_sha256 != manifest.get("states_sha256"):
+        raise DatasetError(
+            f"{pack} was drawn around states with sha256 {manifest.get('states_sha256')}; "
+            f"{states} has {spec.states_sha256}: pass the recorded states file it was labelled from"
+        )
+    todo = set(_prepare(spec, Path(out), spec.command(out)))
+    offsets = np.cumsum([0] + [spec.shard_length(first + k) for k in range(len(checksums))])
+    tasks = [
+        (
+            spec,
+            first + k,
+            Path(out),
+            checksums[k],
+            {name: col[offsets[k] : offsets[k + 1]] for name, col in columns.items()},
+        )
+        for k in range(len(checksums))
+        if first + k in todo
+    ]
+    exact, deviation = 0, 0.0
+    bar = _progress_bar(int(offsets[-1]), progress)
+    if workers == 1:
+        results: Iterable[tuple[bool, float, int]] = map(_restore_shard, tasks)
+    else:
+        pool = multiprocessing.get_context("fork").Pool(workers)
+        results = pool.imap_unordered(_restore_shard, tasks)
+    try:
+        for is_exact, shard_deviation, length in results:
+            exact += is_exact
+            deviation = max(deviation, shard_deviation)
+            bar.update(length)
+    finally:
+        if workers != 1:
+            pool.terminate()
+        bar.close()
+    return LabelPack(
+        path=Path(out),
+        first_shard=first,
+        shards=len(checksums),
+        samples=int(offsets[-1]),
+        exact_shards=exact + len(checksums) - len(tasks),
+        max_row_sum_deviation=deviation,
+    )
+
+
+def _first_shard_of_pack(path: str | Path) -> int:
+    with np.load(path) as data:
+        if "first_shard" not in data:
+            raise DatasetError(f"{path} is not a label pack (made by `dataset pack`)")
+        return int(data["first_shard"])
+
+
+def _restore_shard(task: tuple[DatasetSpec, int, Path, str, dict[str, np.ndarray]]) -> tuple[bool, float, int]:
+    spec, index, out, checksum, labels = task
+    lam = shard_states(spec, index).astype(np.float32)
+    exact = _lam_checksum(lam) == checksum
+    deviation = 0.0
+    if not exact:
+        deviation = (
+            float(np.max(np.abs(_row_sums(lam) - labels["row_sum"]))) if len(lam) == len(labels["row_sum"]) else np.inf
+        )
+        if not deviation <= STATE_TOLERANCE:
+            raise DatasetError(
+                f"shard {index}: the states drawn here differ from the labelled ones (row sums by up to "
+                f"{deviation:.3g}, tolerance {STATE_TOLERANCE}); unpack with the package version that labelled it"
+            )
+    atomic_savez(shard_path(out, index), lam=lam, **{name: labels[name] for name in LABEL_FIELDS})
+    return exact, deviation, len(lam)
+
+
 @dataclass(frozen=True)
 class Dataset:
     """The samples of a dataset directory that have the requested target, plus what was excluded."""
@@ -420,7 +614,44 @@ def main(argv: list[str] | None = None) -> int:
     gen.add_argument("--quiet", action="store_true")
     summ = sub.add_parser("summary", help="print the manifest and status counts of a dataset")
     summ.add_argument("path")
+    pk = sub.add_parser("pack", help="the labels of a dataset's complete shards, without their states, in one file")
+    pk.add_argument("path", help="dataset directory")
+    pk.add_argument("--out", required=True, help="pack file (.npz)")
+    pk.add_argument("--first-shard", type=int, default=0)
+    pk.add_argument("--max-shards", type=int, default=None, help="split a large dataset into several packs")
+    up = sub.add_parser("unpack", help="restore a pack's shards, drawing their states again from the seeds")
+    up.add_argument("pack", nargs="+", help="pack files of one dataset (restored in the order of their shards)")
+    up.add_argument("--out", required=True, help="dataset directory")
+    up.add_argument("--states", default=None, help="'rollouts': the recorded states file the dataset was drawn around")
+    up.add_argument("--workers", type=int, default=1)
+    up.add_argument("--quiet", action="store_true")
     args = parser.parse_args(argv)
+
+    if args.command in ("pack", "unpack"):
+        try:
+            if args.command == "pack":
+                packed = pack_labels(args.path, args.out, first_shard=args.first_shard, max_shards=args.max_shards)
+                print(
+                    f"{packed.path}: shards {packed.first_shard}-{packed.first_shard + packed.shards - 1}, "
+                    f"{packed.samples} samples"
+                )
+                return 0
+            missing = [f for f in args.pack if not Path(f).is_file()]
+            if missing:
+                raise DatasetError(f"no such pack file: {', '.join(missing)}")
+            order = sorted(args.pack, key=_first_shard_of_pack)
+            for pack in order:
+                restored = unpack_labels(
+                    pack, args.out, states=args.states, workers=args.workers, progress=not args.quiet
+                )
+                print(
+                    f"{pack} -> {restored.path}: {restored.shards} shards, {restored.samples} samples, "
+                    f"{restored.exact_shards} drawn bit-identically, largest row-sum deviation "
+                    f"{restored.max_row_sum_deviation:.2g}"
+                )
+        except DatasetError as exc:
+            parser.error(str(exc))
+        return 0
 
     if args.command == "summary":
         ds = load_dataset(args.path)

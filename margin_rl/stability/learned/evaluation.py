@@ -27,14 +27,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from margin_rl.atomic import atomic_write_text
 from margin_rl.robot import load_robot
-from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES, check_lambda
+from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES, check_lambda, lambda_names
 from margin_rl.stability.analytic.margin import STATUSES, AnalyticSettings, analytic_margin_batch
 from margin_rl.stability.analytic.sampling import sample_states, standing_state
 from margin_rl.stability.learned.model import LearnedMargin, weights_path
@@ -271,6 +271,53 @@ def sweep_figure(result: SweepResult, index: int, path: Path, title: str = "") -
     return path
 
 
+def finite_difference_steps(input_std: np.ndarray) -> np.ndarray:
+    """Central-difference step per lambda entry: 2 % of its training spread (smaller for e_g, kept unit)."""
+    h = 0.02 * np.asarray(input_std, dtype=float)
+    h[LAMBDA_SLICES["gravity_axis"]] = np.minimum(h[LAMBDA_SLICES["gravity_axis"]], 2e-4)
+    return h
+
+
+def gradient_check(
+    model: LearnedMargin, robot_name: str, lam: np.ndarray, settings: AnalyticSettings, workers: int | None = None
+) -> dict[str, object]:
+    """Cosine similarity of dm_l/dlambda with central finite differences of m_a (2 x 43 analytic calls each).
+
+    Contact flags are binary and skipped; an entry is used only when both perturbed states are ``ok``.
+    The analytic margins are computed with a tight focus bracket so that bracket noise stays far below
+    the finite-difference signal.
+    """
+    steps = finite_difference_steps(model.params.input_std)
+    contacts = set(range(LAMBDA_SLICES["contacts"].start, LAMBDA_SLICES["contacts"].stop))
+    dims = [j for j in range(lam.shape[1]) if j not in contacts]
+    plus = np.repeat(lam[:, None, :], len(dims), axis=1).astype(np.float64)
+    minus = plus.copy()
+    for k, j in enumerate(dims):
+        plus[:, k, j] += steps[j]
+        minus[:, k, j] -= steps[j]
+    both = np.concatenate([plus.reshape(-1, lam.shape[1]), minus.reshape(-1, lam.shape[1])])
+    labels = analytic_margin_batch(robot_name, both, settings, workers=workers)
+    ok = labels.status == STATUSES.index("ok")
+    m = labels.margin.reshape(2, len(lam), len(dims))
+    ok = ok.reshape(2, len(lam), len(dims)).all(axis=0)
+    fd = (m[0] - m[1]) / (2 * steps[dims])
+    learned = model.grad(lam.astype(np.float64))[:, dims]
+    cosines = []
+    for i in range(len(lam)):
+        a, b = learned[i][ok[i]], fd[i][ok[i]]
+        if len(a) >= len(dims) // 2 and np.linalg.norm(a) > 0 and np.linalg.norm(b) > 0:
+            cosines.append(float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b))))
+    cos = np.asarray(cosines)
+    return {
+        "n_states": len(cos),
+        "analytic_calls": len(both),
+        "median_cosine": float(np.median(cos)) if len(cos) else float("nan"),
+        "p10_cosine": float(np.percentile(cos, 10)) if len(cos) else float("nan"),
+        "fraction_above_0.9": float(np.mean(cos >= 0.9)) if len(cos) else float("nan"),
+        "step": {name: float(s) for name, s in zip(lambda_names(), steps, strict=True) if s > 0},
+    }
+
+
 def evaluate(
     robot_name: str,
     model: LearnedMargin,
@@ -332,6 +379,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default=None, help="write the report as JSON here")
     parser.add_argument("--figure", default=None, help="write a Fig. 4-like PNG of the nominal double stance")
     parser.add_argument(
+        "--gradient-states",
+        type=int,
+        default=0,
+        help="also compare dm_l/dlambda with finite differences of m_a on this many fresh Table I states",
+    )
+    parser.add_argument(
         "--update-card",
         action="store_true",
         help="store the report as 'paper_protocol' in the weights' model card (the checksum is of the .npz)",
@@ -344,6 +397,12 @@ def main(argv: list[str] | None = None) -> int:
     recorded = model.card.get("analytic_settings")  # the settings of the labels the network learned
     settings = AnalyticSettings.from_dict(recorded) if isinstance(recorded, dict) else None
     report, nominal = evaluate(args.robot, model, args.n, args.sweeps, args.seed, args.workers, settings)
+    if args.gradient_states > 0:
+        # The training card's check, on fresh Table I states (another seed than the protocol's), with a tight
+        # focus bracket so that the bracket's noise stays far below the finite-difference signal.
+        lam = sample_states(load_robot(args.robot), args.gradient_states, seed=args.seed + 2)
+        tight = replace(settings or AnalyticSettings(), focus_tol=1e-5)
+        report["gradient_check"] = gradient_check(model, args.robot, lam, tight, workers=args.workers)
     report["command"] = "python -m margin_rl.stability.learned.evaluation " + " ".join(argv or sys.argv[1:])
     text = json.dumps(report, indent=2)
     print(text)
@@ -352,7 +411,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.update_card:
         card_path = npz.with_suffix(".json")
         card = json.loads(card_path.read_text())
-        card["paper_protocol"] = report
+        if "gradient_check" in report:
+            check = report["gradient_check"]
+            card["gradient_check"] = {**check, "states": "fresh Table I", "command": report["command"]}
+        card["paper_protocol"] = {k: v for k, v in report.items() if k != "gradient_check"}
         atomic_write_text(card_path, json.dumps(card, indent=2) + "\n")
     if args.figure:
         double = nominal.names.index("2 feet (LF+RH)")

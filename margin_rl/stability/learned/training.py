@@ -44,11 +44,11 @@ import torch
 from margin_rl.network import input_scaling
 from margin_rl.provenance import git_commit
 from margin_rl.robot import load_robot
-from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, LAMBDA_SLICES, lambda_names
-from margin_rl.stability.analytic.margin import STATUSES, AnalyticSettings, analytic_margin_batch
+from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, LAMBDA_SLICES
+from margin_rl.stability.analytic.margin import AnalyticSettings
 from margin_rl.stability.learned.dataset import TARGETS, Dataset, DatasetError, load_dataset
 from margin_rl.stability.learned.evaluation import evaluate as evaluate_protocol
-from margin_rl.stability.learned.evaluation import reliability
+from margin_rl.stability.learned.evaluation import gradient_check, reliability
 from margin_rl.stability.learned.features import PROXY_INDEX, PhysicsConstants, mirror_inputs, physics_inputs
 from margin_rl.stability.learned.margin_mlp import MarginMLP
 from margin_rl.stability.learned.mlp_weights import ARCHITECTURES, MarginWeights, architecture_widths
@@ -356,53 +356,6 @@ def test_metrics(model: LearnedMargin, lam: np.ndarray, margin: np.ndarray) -> d
         "true_positive_rate": signs.true_positive_rate,
         "true_negative_rate": signs.true_negative_rate,
         "stable_fraction": signs.stable_fraction,
-    }
-
-
-def finite_difference_steps(input_std: np.ndarray) -> np.ndarray:
-    """Central-difference step per lambda entry: 2 % of its training spread (smaller for e_g, kept unit)."""
-    h = 0.02 * np.asarray(input_std, dtype=float)
-    h[LAMBDA_SLICES["gravity_axis"]] = np.minimum(h[LAMBDA_SLICES["gravity_axis"]], 2e-4)
-    return h
-
-
-def gradient_check(
-    model: LearnedMargin, robot_name: str, lam: np.ndarray, settings: AnalyticSettings, workers: int | None = None
-) -> dict[str, object]:
-    """Cosine similarity of dm_l/dlambda with central finite differences of m_a (2 x 43 analytic calls each).
-
-    Contact flags are binary and skipped; an entry is used only when both perturbed states are ``ok``.
-    The analytic margins are computed with a tight focus bracket so that bracket noise stays far below
-    the finite-difference signal.
-    """
-    steps = finite_difference_steps(model.params.input_std)
-    contacts = set(range(LAMBDA_SLICES["contacts"].start, LAMBDA_SLICES["contacts"].stop))
-    dims = [j for j in range(lam.shape[1]) if j not in contacts]
-    plus = np.repeat(lam[:, None, :], len(dims), axis=1).astype(np.float64)
-    minus = plus.copy()
-    for k, j in enumerate(dims):
-        plus[:, k, j] += steps[j]
-        minus[:, k, j] -= steps[j]
-    both = np.concatenate([plus.reshape(-1, lam.shape[1]), minus.reshape(-1, lam.shape[1])])
-    labels = analytic_margin_batch(robot_name, both, settings, workers=workers)
-    ok = labels.status == STATUSES.index("ok")
-    m = labels.margin.reshape(2, len(lam), len(dims))
-    ok = ok.reshape(2, len(lam), len(dims)).all(axis=0)
-    fd = (m[0] - m[1]) / (2 * steps[dims])
-    learned = model.grad(lam.astype(np.float64))[:, dims]
-    cosines = []
-    for i in range(len(lam)):
-        a, b = learned[i][ok[i]], fd[i][ok[i]]
-        if len(a) >= len(dims) // 2 and np.linalg.norm(a) > 0 and np.linalg.norm(b) > 0:
-            cosines.append(float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b))))
-    cos = np.asarray(cosines)
-    return {
-        "n_states": len(cos),
-        "analytic_calls": len(both),
-        "median_cosine": float(np.median(cos)) if len(cos) else float("nan"),
-        "p10_cosine": float(np.percentile(cos, 10)) if len(cos) else float("nan"),
-        "fraction_above_0.9": float(np.mean(cos >= 0.9)) if len(cos) else float("nan"),
-        "step": {name: float(s) for name, s in zip(lambda_names(), steps, strict=True) if s > 0},
     }
 
 

@@ -218,3 +218,85 @@ def test_a_format_1_dataset_cannot_train_the_extended_target(tmp_path: Path) -> 
     assert len(load_dataset(out).lam) > 0
     with pytest.raises(DatasetError, match="format-1 dataset"):
         load_dataset(out, target="extended")
+
+
+def _same_shards(a: Path, b: Path) -> None:
+    assert [p.name for p in shards(a)] == [p.name for p in shards(b)]
+    for left, right in zip(shards(a), shards(b), strict=True):
+        with np.load(left) as x, np.load(right) as y:
+            assert sorted(x.files) == sorted(y.files)
+            for key in x.files:
+                np.testing.assert_array_equal(x[key], y[key], err_msg=f"{left.name}: {key}")
+
+
+def test_labels_packed_without_states_unpack_to_the_same_dataset(tmp_path: Path) -> None:
+    from margin_rl.stability.learned.dataset import pack_labels, unpack_labels
+
+    out = tmp_path / "ds"
+    generate(SPEC, out, workers=1, progress=False)
+    # Two packs (shards 0-1, then 2), restored in either order on the command line.
+    first = pack_labels(out, tmp_path / "a.npz", max_shards=2)
+    second = pack_labels(out, tmp_path / "b.npz", first_shard=2)
+    assert (first.shards, first.samples, second.shards, second.samples) == (2, 40, 1, 10)
+    assert (tmp_path / "a.npz").stat().st_size < 0.3 * sum(p.stat().st_size for p in shards(out))
+    assert main(["unpack", str(tmp_path / "b.npz"), str(tmp_path / "a.npz"), "--out", str(tmp_path / "back"),
+                 "--quiet"]) == 0  # fmt: skip
+    _same_shards(out, tmp_path / "back")
+    manifest = json.loads((tmp_path / "back" / "manifest.json").read_text())
+    assert manifest["n"] == 50 and manifest["seed"] == 3 and "generate --robot anymal_b --n 50" in manifest["command"]
+    # Generating the unpacked directory's dataset here finds every shard present: it is that dataset.
+    assert sum(generate(SPEC, tmp_path / "back", workers=1, progress=False).values()) == 0
+    # A rerun of an unpack into a complete directory rewrites nothing.
+    mtimes = [p.stat().st_mtime_ns for p in shards(tmp_path / "back")]
+    restored = unpack_labels(tmp_path / "a.npz", tmp_path / "back", progress=False)
+    assert restored.exact_shards == 2 and [p.stat().st_mtime_ns for p in shards(tmp_path / "back")] == mtimes
+
+
+def test_a_pack_ends_at_the_first_missing_shard(tmp_path: Path) -> None:
+    from margin_rl.stability.learned.dataset import pack_labels
+
+    out = tmp_path / "ds"
+    generate(SPEC, out, workers=1, progress=False)
+    shard_path(out, 1).write_bytes(b"in flight")
+    assert pack_labels(out, tmp_path / "p.npz").shards == 1
+    with pytest.raises(DatasetError, match="shard 1 is not complete"):
+        pack_labels(out, tmp_path / "q.npz", first_shard=1)
+    with pytest.raises(DatasetError, match="not a margin_rl dataset"):
+        pack_labels(tmp_path, tmp_path / "r.npz")
+
+
+def test_unpack_refuses_states_that_were_not_the_labelled_ones(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    from margin_rl.provenance import sha256_file
+    from margin_rl.stability.analytic.sampling import sample_states
+    from margin_rl.stability.learned.dataset import pack_labels, unpack_labels
+
+    out = tmp_path / "ds"
+    generate(SPEC, out, workers=1, progress=False)
+    pack_labels(out, tmp_path / "p.npz")
+    with np.load(tmp_path / "p.npz") as data:
+        tampered = {key: data[key] for key in data.files}
+    tampered["row_sum"] = tampered["row_sum"] + 1e-3  # as if the labels belonged to other states
+    tampered["lam_sha256"] = np.array(["0" * 64] * len(tampered["lam_sha256"]))
+    np.savez(tmp_path / "t.npz", **tampered)
+    with pytest.raises(DatasetError, match="shard 0: the states drawn here differ"):
+        unpack_labels(tmp_path / "t.npz", tmp_path / "back", progress=False)
+    assert not shards(tmp_path / "back")
+    # A rollouts dataset needs the recorded states it was drawn around, and exactly those.
+    states = tmp_path / "rollouts.npz"
+    np.savez(states, lam=sample_states(load_robot("anymal_b"), 30, seed=9).astype(np.float32))
+    spec = replace(SPEC, n=10, shard_size=10, distribution="rollouts", states=str(states),
+                   states_sha256=sha256_file(states))  # fmt: skip
+    generate(spec, tmp_path / "roll", workers=1, progress=False)
+    pack_labels(tmp_path / "roll", tmp_path / "roll.npz")
+    with pytest.raises(DatasetError, match="needs --states"):
+        unpack_labels(tmp_path / "roll.npz", tmp_path / "roll_back", progress=False)
+    other = tmp_path / "other.npz"
+    np.savez(other, lam=sample_states(load_robot("anymal_b"), 30, seed=10).astype(np.float32))
+    with pytest.raises(DatasetError, match="pass the recorded states file"):
+        unpack_labels(tmp_path / "roll.npz", tmp_path / "roll_back", states=other, progress=False)
+    unpack_labels(tmp_path / "roll.npz", tmp_path / "roll_back", states=states, progress=False)
+    _same_shards(tmp_path / "roll", tmp_path / "roll_back")
+    with pytest.raises(SystemExit):
+        main(["unpack", str(tmp_path / "missing.npz"), "--out", str(tmp_path / "x")])

@@ -123,6 +123,25 @@ def test_cli_update_card_keeps_the_weights_loadable(tmp_path: Path) -> None:
     assert "table_i" not in card["paper_protocol"]["acceleration_sweeps"]
 
 
+def test_cli_gradient_check_goes_into_the_card(tmp_path: Path) -> None:
+    import shutil
+
+    from margin_rl.stability.learned.model import weights_path
+
+    bundled = weights_path("anymal_c")
+    for suffix in (".npz", ".json"):
+        shutil.copy(bundled.with_suffix(suffix), tmp_path / f"c{suffix}")
+    args = ["--robot", "anymal_c", "--weights", str(tmp_path / "c.npz"), "--n", "10", "--sweeps", "0"]
+    assert main([*args, "--workers", "1", "--gradient-states", "3", "--update-card"]) == 0
+    card = LearnedMargin.load(tmp_path / "c.npz").card
+    check = card["gradient_check"]
+    assert check["states"] == "fresh Table I" and "--gradient-states 3" in check["command"]
+    # 43 continuous entries (the four contact flags are skipped), each perturbed both ways, per state.
+    assert check["analytic_calls"] == 3 * 43 * 2 and 0 < check["n_states"] <= 3
+    assert -1.0 <= check["median_cosine"] <= 1.0
+    assert "gradient_check" not in card["paper_protocol"]
+
+
 def test_cli_refuses_weights_of_another_robot(capsys: pytest.CaptureFixture[str]) -> None:
     from margin_rl.stability.learned.model import weights_path
 

@@ -27,7 +27,6 @@ import numpy as np
 import torch
 
 from margin_rl.robot import load_robot
-from margin_rl.stability.learned.dataset import load_dataset
 from margin_rl.stability.learned.evaluation import reliability
 from margin_rl.stability.learned.features import PROXY_INDEX, PhysicsConstants, physics_features
 from margin_rl.stability.learned.mlp_weights import architecture_widths
@@ -37,6 +36,7 @@ from margin_rl.stability.learned.training import (
     TrainConfig,
     build_model,
     fit,
+    load_training_data,
     model_inputs,
     split_indices,
     test_metrics,
@@ -83,7 +83,7 @@ def fit_support(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", required=True)
+    parser.add_argument("--data", required=True, action="append", help="dataset directory; repeat to mix datasets")
     parser.add_argument("--recipe", type=parse_recipe, action="append", required=True)
     parser.add_argument("--train-subset", type=int, action="append", default=None, help="0: the whole train split")
     parser.add_argument("--epochs", type=int, default=20)
@@ -100,13 +100,18 @@ def main() -> None:
         "every model is also judged on their ok states",
     )
     parser.add_argument(
+        "--table-i",
+        default=None,
+        help="labelled fresh Table I states (the same format): every model is also judged on their ok states",
+    )
+    parser.add_argument(
         "--reference", action="append", default=[], help="shipped weights judged on the same states (e.g. anymal_c)"
     )
     parser.add_argument("--out", default=None, help="write the rows as JSON here")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
-    ds = load_dataset(args.data, max_samples=args.max_samples)
+    ds, _ = load_training_data(args.data, TrainConfig(max_samples=args.max_samples))  # m_a on the ok samples
     lam, margin = ds.lam.astype(np.float64), ds.margin.astype(np.float64)
     robot = str(ds.manifest["robot"])
     constants = PhysicsConstants.for_robot(load_robot(robot))
@@ -116,25 +121,24 @@ def main() -> None:
     )  # fmt: skip
     split = split_indices(len(lam), base)
     print(
-        f"{args.data}: {len(lam)} ok samples of {robot}; "
+        f"{' + '.join(args.data)}: {len(lam)} ok samples of {robot}; "
         f"split {len(split.train)} / {len(split.val)} / {len(split.test)}"
     )
-    walking = None
-    if args.walking:
-        with np.load(args.walking) as z:
-            ok = z["status"] == 0
-            walking = z["lam"][ok].astype(np.float64), z["margin"][ok].astype(np.float64)
-        print(f"{args.walking}: {len(walking[0])} walking states with an analytic margin")
+    held_out: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for name, path in (("walking", args.walking), ("table_i", args.table_i)):
+        if path:
+            with np.load(path) as z:
+                ok = z["status"] == 0
+                held_out[name] = z["lam"][ok].astype(np.float64), z["margin"][ok].astype(np.float64)
+            print(f"{path}: {len(held_out[name][0])} {name} states with an analytic margin")
 
     def walking_scores(model) -> dict[str, float]:
-        if walking is None:
-            return {}
-        pred = np.asarray(model(walking[0]))
-        signs = reliability(pred, walking[1])
-        return {
-            "walking_rmse_cm": 100 * float(np.sqrt(np.mean((pred - walking[1]) ** 2))),
-            "walking_sign_agreement": signs.sign_agreement,
-        }
+        scores = {}
+        for name, (states, truth) in held_out.items():
+            pred = np.asarray(model(states))
+            scores[f"{name}_rmse_cm"] = 100 * float(np.sqrt(np.mean((pred - truth) ** 2)))
+            scores[f"{name}_sign_agreement"] = reliability(pred, truth).sign_agreement
+        return scores
 
     rows = []
     for name in args.reference:

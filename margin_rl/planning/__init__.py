@@ -3,7 +3,7 @@
 A layer above :mod:`margin_rl.stability` (nothing below depends on it)::
 
     model = planning_robot(load_robot("anymal_c"))              # planning pose, range of motion
-    margin = LearnedMargin.load("anymal_c_table_i")  # planning_weights("anymal_c")
+    margin = LearnedMargin.load("anymal_c")                      # planning_weights("anymal_c")
     scenario = get_scenario("side_step")                         # flat, side_step, course, env_rough
     result = run_course(model, scenario, WALK, PlannerConfig(), margin)   # replan at 1 Hz, T = 3 s
     check = check_course(result, model.robot, margin)            # analytic margin, IK reachability

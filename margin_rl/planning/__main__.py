@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--weights", default=None,
         help="learned-margin weights the plans are constrained by: a bundled name (e.g. anymal_c) or an .npz with "
-        "its card (default: the robot's Table I network, margin_rl.planning.mlp.planning_weights)",
+        "its card (default: the robot's default network, margin_rl.planning.mlp.planning_weights)",
     )  # fmt: skip
     args = parser.parse_args(argv)
     names = list(SCENARIOS) if args.scenario == "all" else [args.scenario]

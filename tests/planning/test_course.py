@@ -77,12 +77,13 @@ def test_cli_refuses_unknown_scenarios(capsys):
 
 
 def test_cli_plans_with_other_weights_and_records_them(tmp_path, capsys):
-    """``--weights`` replaces the Table I network (here by the robot's default network) and the summary records
+    """``--weights`` replaces the default network (here by the robot's Table I network) and the summary records
     which weights constrained the plans; unknown weights are refused with the bundled names."""
-    main(["--scenario", "flat", "--max-plans", "1", "--no-video", "--no-contrast", "--weights", "anymal_c",
+    main(["--scenario", "flat", "--max-plans", "1", "--no-video", "--no-contrast", "--weights", "anymal_c_table_i",
           "--out", str(tmp_path)])  # fmt: skip
     summary = json.loads((tmp_path / "anymal_c_flat_walk.json").read_text())
-    assert summary["weights"] == {"name": "anymal_c", "sha256": LearnedMargin.load("anymal_c").card["sha256"]}
+    expected = LearnedMargin.load("anymal_c_table_i").card["sha256"]
+    assert summary["weights"] == {"name": "anymal_c_table_i", "sha256": expected}
     capsys.readouterr()
     with pytest.raises(SystemExit) as exc:
         main(["--scenario", "flat", "--max-plans", "1", "--weights", "anymal_x", "--out", str(tmp_path)])

@@ -10,8 +10,9 @@ modules (:mod:`~margin_rl.stability.learned.margin_mlp`) use, so that neither im
   layout; :meth:`MarginWeights.network` folds them into the :class:`~margin_rl.network.DenseNetwork` that
   gives the numpy, torch and CasADi forms);
 * the bundled files: :func:`weights_dir`, :func:`bundled_robots`, :func:`bundled_weights`, :func:`weights_path`
-  (``"<robot>"``: the default network, trained on the states walking policies visit and on Table I (learned
-  margin v2); ``"<robot>_table_i"``: the network trained on seed 000's Table I alone, the v1 default);
+  (``"<robot>"``: the default network of the environments and the planner, trained on Table I and on the
+  states walking policies visit (learned margin v3); ``"<robot>_table_i"``: the network trained on seed 000's
+  Table I alone, the v1 default, kept as named historical weights);
 * :func:`save_weights` (``<path>.npz`` and its model card ``<path>.json``), :func:`layout_signature`,
   :data:`WEIGHTS_FORMAT` and :class:`WeightsError`.
 """

@@ -23,7 +23,11 @@ The recipe's name is written into the run's ``config.json``.
   (three quarters of the sampled actions clipped); without it ANYmal B's baselines track the command two to three
   times more closely and fall less often overall, and its margin variant falls at most 7 of 64 times in any cell
   (up to 56 before; BENCHMARKS "The action noise", :mod:`margin_rl.train.exploration`). Runs trained before this
-  change record ``entropy_coef`` 0.01 in their ``config.json``.
+  change record ``entropy_coef`` 0.01 in their ``config.json``. The margin variant's weight is 0.1: re-swept on
+  ANYmal B with three seeds per weight (0.1, 0.2, 0.5), the rule stated before the runs chose it over 0.2 (the
+  falls tolerance met in every cell where 0.2 missed two; linear acceleration 30 % lower, p = 0.013; lateral
+  30 N s pushes survived as often as the baselines; BENCHMARKS "Five training seeds per variant, and the margin
+  weight re-swept"). The shipped robust bundles were trained at 0.2 before and keep it (their ``config.json``).
 """
 
 from __future__ import annotations
@@ -109,7 +113,7 @@ RECIPES: dict[str, TrainingRecipe] = {
             },
             num_envs=512,
             total_steps=10_000_000,
-            margin_weight=0.2,
+            margin_weight=0.1,
             ppo_options={"rsl": {"entropy_coef": 0.0}, "sb3": {"ent_coef": 0.0}},
         ),
     )

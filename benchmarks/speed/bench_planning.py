@@ -44,6 +44,13 @@ def main() -> None:
     args_parser.add_argument("--scenario", default="course")
     args_parser.add_argument("--repeats", type=int, default=3)
     args_parser.add_argument("--analytic-iterations", type=int, default=8)
+    args_parser.add_argument(
+        "--also-weights",
+        action="append",
+        default=[],
+        help="other learned-margin weights (bundled name or .npz) for an extra exact-Hessian row each, "
+        "e.g. anymal_c_table_i",
+    )
     args = args_parser.parse_args()
 
     robot = load_robot(args.robot)
@@ -65,11 +72,15 @@ def main() -> None:
         analytic: PlannerConfig(margin="analytic_fd", hessian="quasi-newton", max_iter=args.analytic_iterations),
         "no margin constraint (quasi-Newton)": PlannerConfig(margin="none", hessian="quasi-newton"),
     }
+    weights = dict.fromkeys(variants, margin)
+    for other in args.also_weights:
+        name = f"learned ({other}), exact Hessian by the chain rule"
+        variants[name], weights[name] = PlannerConfig(hessian="exact"), LearnedMargin.load(other)
     problems = {}
     for name, config in variants.items():
         tic = time.perf_counter()
         chain_rule = "by CasADi" not in name
-        problems[name] = TrajectoryProblem(model, hm, WALK, 0.0, config, margin, chain_rule_hessian=chain_rule)
+        problems[name] = TrajectoryProblem(model, hm, WALK, 0.0, config, weights[name], chain_rule_hessian=chain_rule)
         problems[name].build_seconds = time.perf_counter() - tic
 
     def runner(problem: TrajectoryProblem):
@@ -108,7 +119,8 @@ def main() -> None:
     print(
         f"problem: {args.robot}, walk, {args.scenario}, T = 3.0 s, dT = 0.2 s: "
         f"{learned_problem.n_decision} variables, {learned_problem.n_constraints} constraints "
-        f"({learned_problem.schedule.n_nodes} margin constraints), {len(learned_problem.schedule.slots)} footholds"
+        f"({learned_problem.schedule.n_nodes} margin constraints), {len(learned_problem.schedule.slots)} footholds; "
+        f"learned margin {planning_weights(args.robot)} ({margin.card.get('sha256', '?')[:12]})"
     )
     summary, table = {}, []
     for name, values in rows.items():

@@ -76,7 +76,12 @@ def evaluate_scenario(
     tic = time.perf_counter()
     result = run_course(model, scenario, gait, config, margin_model, max_plans=max_plans)
     check = check_course(result, robot, margin_model)
-    summary["learned"] = {**result.solver_summary(), **check.summary(), "reached_goal": result.reached_goal}
+    summary["learned"] = {
+        **result.solver_summary(),
+        **check.summary(),
+        "reached_goal": result.reached_goal,
+        "distance_to_goal_m": result.distance_to_goal,
+    }
     runs = {"learned": (result, check)}
     if contrast:
         plain = replace(config, margin="none")

@@ -42,9 +42,10 @@ def planning_weights(robot_name: str) -> str:
 
     One network per robot serves the environments, the planner and users. The default (learned margin v3) is
     trained on Table I and on the neighbourhoods of walking policies' states, and is closer to the analytic margin
-    on Table I states than the v2 network it replaced (its card's ``paper_protocol``); along the planner's courses
-    the analytic margin stays within 1 cm of the bound (BENCHMARKS.md, "Trajectory optimisation"). The Table I
-    networks the planner used before stay loadable as ``<robot>_table_i``.
+    on Table I states than the v2 network it replaced (its card's ``paper_protocol``). Along the planner's courses
+    the analytic margin stays within 1 cm of the bound at every sampled instant; ANYmal B's plans walk slower than
+    with the Table I network the planner used before (BENCHMARKS.md, "Trajectory optimisation plans"), which stays
+    loadable as ``<robot>_table_i`` (``--weights``).
     """
     return robot_name
 

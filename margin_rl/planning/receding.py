@@ -24,6 +24,8 @@ from margin_rl.planning.problem import BaseState, Plan, PlannerConfig, Trajector
 from margin_rl.planning.robot_model import PlanningRobot
 from margin_rl.planning.scenarios import Scenario
 
+GOAL_TOLERANCE = 0.15  # [m] a course counts as finished when its last plan starts this close to the goal
+
 
 @dataclass(frozen=True, eq=False)
 class CourseResult:
@@ -36,7 +38,8 @@ class CourseResult:
     period: float  # [s]
     plans: tuple[Plan, ...]
     build_seconds: float  # problem construction, all phases [s]
-    reached_goal: bool
+    reached_goal: bool  # the last plan starts within GOAL_TOLERANCE of the goal
+    distance_to_goal: float  # [m] horizontal, from the base at the last plan's start to the goal
 
     @property
     def duration(self) -> float:
@@ -133,8 +136,10 @@ def run_course(
         previous = plan
         state = plan.state_at(t0 + period)
         footholds = plan.current_footholds(t0 + period)
-    reached = bool(np.linalg.norm(plans[-1].state_at(plans[-1].t0).position[:2] - np.array(scenario.goal_xy)) < 0.15)
-    return CourseResult(scenario, gait, config, model.name, period, tuple(plans), build, reached)
+    distance = float(np.linalg.norm(plans[-1].state_at(plans[-1].t0).position[:2] - np.array(scenario.goal_xy)))
+    return CourseResult(
+        scenario, gait, config, model.name, period, tuple(plans), build, distance < GOAL_TOLERANCE, distance
+    )
 
 
 def _retimed(problem: TrajectoryProblem, t0: float) -> TrajectoryProblem:

@@ -25,6 +25,10 @@ def test_receding_horizon_is_warm_started_and_continuous(short_course):
         # Each horizon starts where the previous plan is one period later.
         np.testing.assert_allclose(b.base[0], np.concatenate(a.base_at(b.t0)[:4]), atol=1e-9)
     assert plans[-1].base[0, 0] > plans[0].base[0, 0] + 0.1  # progress along the course
+    # Three plans of a 6 m course end far from its goal: the distance is the last plan's start to the goal.
+    goal = np.array(get_scenario("flat").goal_xy)
+    assert short_course.distance_to_goal == pytest.approx(np.linalg.norm(plans[-1].base[0, :2] - goal))
+    assert short_course.distance_to_goal > 4.0 and not short_course.reached_goal
 
 
 def test_analytic_margin_along_the_plan(short_course, robot_c, margin_c):

@@ -10,6 +10,11 @@ Command line::
         [--workers 2]
     python -m margin_rl.stability.learned.dataset generate ... --ray auto          # the same tasks on a Ray cluster
     python -m margin_rl.stability.learned.dataset summary data/anymal_c
+    python -m margin_rl.stability.learned.dataset pack data/anymal_c --out labels.npz    # labels only, ~16 B each
+    python -m margin_rl.stability.learned.dataset unpack labels.npz --out data/anymal_c  # states redrawn, checked
+
+``pack`` / ``unpack`` move a dataset labelled on another machine through a narrow channel: the labels travel, the
+states (188 bytes a sample) are drawn again from the manifest's seeds and checked against each shard's checksum.
 
 Layout of a dataset directory::
 

@@ -385,7 +385,7 @@ class EnvConfig:
     # and keep the config's values in replace() and in gymnasium.make keywords).
     reward_params: RewardParams = field(default_factory=RewardParams)
     # EMA factor on the finite-difference accelerations in lambda (0: none). 0.5 halves the touchdown-impact
-    # noise that otherwise drives the margin term (learned margin v2, item 2: BENCHMARKS "Accelerations in
+    # noise that otherwise drives the margin term (introduced with learned margin v2: BENCHMARKS "Accelerations in
     # lambda"); runs recorded before v2 keep their 0.0 in their config.json.
     acceleration_filter: float = 0.5
     privileged_observations: bool = False  # add the critic group (terrain heights, friction, margin)

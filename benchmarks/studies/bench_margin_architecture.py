@@ -132,7 +132,7 @@ def main() -> None:
                 held_out[name] = z["lam"][ok].astype(np.float64), z["margin"][ok].astype(np.float64)
             print(f"{path}: {len(held_out[name][0])} {name} states with an analytic margin")
 
-    def walking_scores(model) -> dict[str, float]:
+    def held_out_scores(model) -> dict[str, float]:
         scores = {}
         for name, (states, truth) in held_out.items():
             pred = np.asarray(model(states))
@@ -148,7 +148,7 @@ def main() -> None:
             "recipe": f"shipped {name}",
             "test_rmse_cm": metrics["rmse_cm"],
             "sign_agreement": metrics["sign_agreement"],
-            **walking_scores(reference),
+            **held_out_scores(reference),
         }
         rows.append(row)
         print(json.dumps(row), flush=True)
@@ -185,7 +185,7 @@ def main() -> None:
                 "last_train_rmse_cm": summary["last_train_rmse_cm"],
                 "train_seconds": seconds,
                 "epochs_run": summary["epochs_run"],
-                **walking_scores(learned),
+                **held_out_scores(learned),
             }
             rows.append(row)
             print(json.dumps(row), flush=True)

@@ -45,9 +45,10 @@ import multiprocessing
 import os
 import shlex
 import sys
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 from tqdm import tqdm
@@ -69,6 +70,9 @@ from margin_rl.stability.analytic.margin import (
     worker_robot,
 )
 from margin_rl.stability.analytic.sampling import DISTRIBUTIONS, SAMPLER_VERSION, sample_around_states, sample_states
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 DISTRIBUTION_NAMES: tuple[str, ...] = (*DISTRIBUTIONS, "rollouts")
 """State distributions of a dataset: the named samplers, and "rollouts" (around recorded states)."""
@@ -242,14 +246,21 @@ def _prepare(spec: DatasetSpec, out: Path, command: str) -> list[int]:
     return [i for i in range(spec.n_shards) if not _shard_is_complete(shard_path(out, i), spec.shard_length(i))]
 
 
-def _local_tasks(spec: DatasetSpec, todo: Sequence[int], out: Path, workers: int) -> Iterator[tuple[int, dict]]:
+def _unordered(function: Callable[[T], R], tasks: Sequence[T], workers: int) -> Iterator[R]:
+    """``function`` over ``tasks`` in this process (``workers == 1``) or a fork pool; results as they finish.
+
+    Closing the iterator (an error in the consumer or a task) ends the pool and its tasks in flight.
+    """
     if workers == 1:
-        for i in todo:
-            yield i, make_shard(spec, i, out)
+        yield from map(function, tasks)
         return
     with multiprocessing.get_context("fork").Pool(workers) as pool:
         # imap_unordered: a shard's result arrives as soon as it is written, whatever the order.
-        yield from pool.imap_unordered(_make_shard_star, [(spec, i, out) for i in todo])
+        yield from pool.imap_unordered(function, tasks)
+
+
+def _local_tasks(spec: DatasetSpec, todo: Sequence[int], out: Path, workers: int) -> Iterator[tuple[int, dict]]:
+    return _unordered(_make_shard_star, [(spec, i, out) for i in todo], workers)
 
 
 def _make_shard_star(args: tuple[DatasetSpec, int, Path]) -> tuple[int, dict[str, int]]:
@@ -466,19 +477,12 @@ def unpack_labels(
     ]
     exact, deviation = 0, 0.0
     bar = _progress_bar(int(offsets[-1]), progress)
-    if workers == 1:
-        results: Iterable[tuple[bool, float, int]] = map(_restore_shard, tasks)
-    else:
-        pool = multiprocessing.get_context("fork").Pool(workers)
-        results = pool.imap_unordered(_restore_shard, tasks)
     try:
-        for is_exact, shard_deviation, length in results:
+        for is_exact, shard_deviation, length in _unordered(_restore_shard, tasks, workers):
             exact += is_exact
             deviation = max(deviation, shard_deviation)
             bar.update(length)
     finally:
-        if workers != 1:
-            pool.terminate()
         bar.close()
     return LabelPack(
         path=Path(out),

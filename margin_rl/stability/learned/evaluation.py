@@ -271,6 +271,9 @@ def sweep_figure(result: SweepResult, index: int, path: Path, title: str = "") -
     return path
 
 
+GRADIENT_FOCUS_TOL = 1e-5  # [m] the margin bracket of the gradient check's analytic margins
+
+
 def finite_difference_steps(input_std: np.ndarray) -> np.ndarray:
     """Central-difference step per lambda entry: 2 % of its training spread (smaller for e_g, kept unit)."""
     h = 0.02 * np.asarray(input_std, dtype=float)
@@ -284,9 +287,10 @@ def gradient_check(
     """Cosine similarity of dm_l/dlambda with central finite differences of m_a (2 x 43 analytic calls each).
 
     Contact flags are binary and skipped; an entry is used only when both perturbed states are ``ok``.
-    The analytic margins are computed with a tight focus bracket so that bracket noise stays far below
-    the finite-difference signal.
+    The analytic margins are computed with ``settings`` (those of the labels) but a tight focus bracket,
+    :data:`GRADIENT_FOCUS_TOL`, so that bracket noise stays far below the finite-difference signal.
     """
+    settings = replace(settings, focus_tol=GRADIENT_FOCUS_TOL)
     steps = finite_difference_steps(model.params.input_std)
     contacts = set(range(LAMBDA_SLICES["contacts"].start, LAMBDA_SLICES["contacts"].stop))
     dims = [j for j in range(lam.shape[1]) if j not in contacts]
@@ -397,12 +401,11 @@ def main(argv: list[str] | None = None) -> int:
     recorded = model.card.get("analytic_settings")  # the settings of the labels the network learned
     settings = AnalyticSettings.from_dict(recorded) if isinstance(recorded, dict) else None
     report, nominal = evaluate(args.robot, model, args.n, args.sweeps, args.seed, args.workers, settings)
-    if args.gradient_states > 0:
-        # The training card's check, on fresh Table I states (another seed than the protocol's), with a tight
-        # focus bracket so that the bracket's noise stays far below the finite-difference signal.
+    if args.gradient_states > 0:  # the training card's check, on fresh Table I states (not the protocol's seed)
         lam = sample_states(load_robot(args.robot), args.gradient_states, seed=args.seed + 2)
-        tight = replace(settings or AnalyticSettings(), focus_tol=1e-5)
-        report["gradient_check"] = gradient_check(model, args.robot, lam, tight, workers=args.workers)
+        report["gradient_check"] = gradient_check(
+            model, args.robot, lam, settings or AnalyticSettings(), workers=args.workers
+        )
     report["command"] = "python -m margin_rl.stability.learned.evaluation " + " ".join(argv or sys.argv[1:])
     text = json.dumps(report, indent=2)
     print(text)

@@ -438,7 +438,7 @@ def train(
     if config.grad_check_states > 0:
         rng = np.random.default_rng(config.seed + 1)
         pick = rng.choice(split.test, size=min(config.grad_check_states, len(split.test)), replace=False)
-        grad = gradient_check(learned, robot, lam[pick], dataclasses.replace(settings, focus_tol=1e-5))
+        grad = gradient_check(learned, robot, lam[pick], settings)
     protocol = {}
     if config.protocol_states > 0:
         protocol, _ = evaluate_protocol(

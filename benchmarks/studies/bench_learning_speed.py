@@ -17,11 +17,11 @@ written. After training (so evaluation never counts as training time) every chec
 ``--episodes`` deterministic 20 s episodes from evaluation seed 1000 at 0.75 m/s, and the table (steps, minutes,
 velocity error, falls, target met) is printed as Markdown and written to ``<out>/learning_speed.json``.
 
-``--from-run RUN_DIR [RUN_DIR ...]`` trains nothing and evaluates the checkpoints of existing single-session runs
-(e.g. a comparison's runs), timing each checkpoint by its file's modification time against the session's start
-time recorded in ``config.json`` (whole seconds; the first checkpoint is written before the first update). With
-several runs, the time to the target is also summarised per margin weight (mean ± std over the runs that met it,
-and how many did), and ``--json`` keeps the whole record (run directories are not committed).
+``--from-run RUN_DIR [RUN_DIR ...]`` trains nothing and evaluates the checkpoints of existing runs trained in
+one ``train`` call, never resumed (e.g. a comparison's runs), timing each checkpoint by its file's modification time
+against that call's start time recorded in ``config.json`` (whole seconds; the first checkpoint is written before
+the first update). With several runs, the time to the target is also summarised per margin weight (mean ± std over
+the runs that met it, and how many did), and ``--json`` keeps the whole record (run directories are not committed).
 """
 
 from __future__ import annotations
@@ -65,15 +65,15 @@ def train_with_timeline(args: argparse.Namespace, run_dir: Path) -> list[tuple[i
 
 
 def timeline_of_run(run_dir: Path) -> list[tuple[int, float, Path]]:
-    """[(env steps, seconds since the session started, checkpoint)] of a finished single-session run."""
+    """[(env steps, seconds since training started, checkpoint)] of a finished run trained in one ``train`` call."""
     from datetime import datetime
 
     from margin_rl.train.runs import CHECKPOINT_DIR, CONFIG_FILE, checkpoint_steps, read_json
 
-    sessions = read_json(run_dir / CONFIG_FILE).get("sessions", [])
-    if len(sessions) != 1:
-        raise SystemExit(f"{run_dir}: {len(sessions)} training sessions; wall time is only defined for one")
-    start = datetime.strptime(sessions[0]["started"], "%Y-%m-%dT%H:%M:%S%z").timestamp()
+    calls = read_json(run_dir / CONFIG_FILE).get("sessions", [])  # one entry per `train` call of the run
+    if len(calls) != 1:
+        raise SystemExit(f"{run_dir}: trained in {len(calls)} train calls; wall time is only defined for one")
+    start = datetime.strptime(calls[0]["started"], "%Y-%m-%dT%H:%M:%S%z").timestamp()
     checkpoints = sorted((run_dir / CHECKPOINT_DIR).glob("ckpt_*.pt"), key=checkpoint_steps)
     return [(checkpoint_steps(p), p.stat().st_mtime - start, p) for p in checkpoints]
 

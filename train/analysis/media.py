@@ -3,7 +3,7 @@
 
 Lazy imports, on purpose: matplotlib is imported inside the plotting functions, after selecting its
 non-interactive ``Agg`` back end, so that importing ``evaluate`` or ``compare`` from Python never switches the
-back end of a user's interactive session; imageio (the optional ``video`` extra) is imported by
+back end of a user's interactive Python shell or notebook; imageio (the optional ``video`` extra) is imported by
 :func:`write_video` only, which explains how to install it when it is missing.
 """
 

@@ -210,7 +210,7 @@ class TrainResult:
     """Outcome of :func:`train`."""
 
     run_dir: Path
-    env_steps: int  # environment steps trained on so far (over every session of the run)
+    env_steps: int  # environment steps trained on so far (over every train call of the run)
     finished: bool  # reached total_steps; final_model and torchscript written
     stopped: bool  # stopped by a signal or request; resumable from `checkpoint`
     checkpoint: Path | None

@@ -129,6 +129,62 @@ class MarginMLP(nn.Module):
         self.register_buffer("lam_high", torch.as_tensor(lam_high, dtype=dtype))
         self.to(dtype)
 
+    @classmethod
+    def from_weights(
+        cls, weights: MarginWeights, mirror_tied: bool = False, dtype: torch.dtype = torch.float32, atol: float = 1e-5
+    ) -> MarginMLP:
+        """The trainable network of saved ``weights`` (the inverse of :meth:`to_weights`), to continue a fit.
+
+        The normalisation and input ranges are the saved ones. ``mirror_tied`` reads the free parameters back
+        from the dense matrices (the first half of each layer's rows, ``v`` the first half of the output row)
+        after checking that the matrices have the tied structure to ``atol``.
+
+        Raises:
+            ValueError: physics weights (their features are not part of this module), or ``mirror_tied`` with
+                weights that are not tied (names the layer): continue such a fit with ``mirror="none"``.
+        """
+        if weights.architecture != "paper":
+            raise ValueError(f"only the paper network can be continued, these weights are {weights.architecture!r}")
+        widths = (weights.weights[0].shape[1], *(w.shape[0] for w in weights.weights))
+        model = cls(
+            input_mean=weights.input_mean,
+            input_std=weights.input_std,
+            output_mean=weights.output_mean,
+            output_std=weights.output_std,
+            lam_low=weights.lam_low,
+            lam_high=weights.lam_high,
+            dtype=dtype,
+            mirror_tied=mirror_tied,
+            widths=widths,
+        )
+        with torch.no_grad():
+            if not mirror_tied:
+                for layer, w, b in zip(model.layers, weights.weights, weights.biases, strict=True):
+                    layer.weight.copy_(torch.as_tensor(w, dtype=dtype))
+                    layer.bias.copy_(torch.as_tensor(b, dtype=dtype))
+                return model
+            half, half_last = widths[1] // 2, widths[-2] // 2
+            model.first["U"].copy_(torch.as_tensor(weights.weights[0][:half], dtype=dtype))
+            model.first["c"].copy_(torch.as_tensor(weights.biases[0][:half], dtype=dtype))
+            for block, w, b in zip(model.hidden, weights.weights[1:-1], weights.biases[1:-1], strict=True):
+                block["AB"].copy_(torch.as_tensor(w[: w.shape[0] // 2], dtype=dtype))
+                block["d"].copy_(torch.as_tensor(b[: b.shape[0] // 2], dtype=dtype))
+            model.last["v"].copy_(torch.as_tensor(weights.weights[-1][:, :half_last], dtype=dtype))
+            model.last["e"].copy_(torch.as_tensor(weights.biases[-1], dtype=dtype))
+        for k, ((w, b), w_saved, b_saved) in enumerate(
+            zip(model.dense_parameters(), weights.weights, weights.biases, strict=True)
+        ):
+            deviation = max(
+                float(np.abs(w.detach().double().numpy() - w_saved).max()),
+                float(np.abs(b.detach().double().numpy() - b_saved).max()),
+            )
+            if deviation > atol:
+                raise ValueError(
+                    f"layer {k} of the weights is not mirror-tied (largest deviation {deviation:.2e}): "
+                    "continue this network with mirror 'none'"
+                )
+        return model
+
     def dense_parameters(self) -> list[tuple[torch.Tensor, torch.Tensor]]:
         """(W_k, b_k) of every layer as dense tensors (differentiable in the tied parameters)."""
         if not self.mirror_tied:

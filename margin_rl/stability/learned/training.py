@@ -16,7 +16,9 @@ support polygon, friction terms), learning the residual over ``--proxy-weight`` 
 The split is seeded (train / validation / test); the input normalisation and the output scaling are
 fitted on the training split and stored with the weights. Adam on the mean squared error of the
 normalised margin, learning rate halved on validation plateaus, early stopping on the validation
-loss (the best epoch is kept). TensorBoard logs go to ``--logdir``. The model card records the
+loss (the best epoch is kept). ``--init WEIGHTS`` continues saved weights (a robot name or an .npz with its
+card) with their normalisation instead of a fresh network, e.g. a fit stopped by ``--max-seconds`` before its
+learning rate had decayed; pass a lower ``--lr``. TensorBoard logs go to ``--logdir``. The model card records the
 dataset and its generation command, the analytic settings, the package commit, this command and the
 held-out test metrics:
 
@@ -93,6 +95,9 @@ class TrainConfig:
     target: str = "analytic"
     device: str = "cpu"  # torch device of the fit ("cuda" on a GPU machine); the weights are saved the same
     max_seconds: float | None = None  # wall-time budget of the fit: no new epoch starts after it (None: no limit)
+    # Continue from saved weights (a robot name or an .npz with its card) instead of a fresh network: their
+    # normalisation is kept, so the fit goes on where a budget-bound fit stopped (use a lower lr than a fresh one).
+    init: str | None = None
 
 
 SCHEDULES = ("plateau", "cosine")
@@ -119,6 +124,8 @@ def check_config(config: TrainConfig) -> TrainConfig:
             raise ValueError(f"TrainConfig.{name} must be >= 0, got {getattr(config, name)}")
     if config.max_seconds is not None and not config.max_seconds > 0:
         raise ValueError(f"TrainConfig.max_seconds must be > 0 or None, got {config.max_seconds!r}")
+    if config.init is not None and config.architecture != "paper":
+        raise ValueError(f"TrainConfig.init continues the paper network only, got architecture {config.architecture!r}")
     if not config.lr > 0 or not 0 <= config.min_lr <= config.lr:
         raise ValueError(f"need lr > 0 and 0 <= min_lr <= lr, got lr={config.lr}, min_lr={config.min_lr}")
     return config
@@ -217,6 +224,31 @@ def build_model(
         mirror_tied=mirror == "tied",
         widths=widths,
     )
+
+
+def continued_model(
+    source: str, robot: str, lam_train: np.ndarray, mirror: str = "none"
+) -> tuple[MarginMLP, dict[str, object]]:
+    """The trainable network of saved weights (``LearnedMargin.load(source)``) and its record for the card.
+
+    The saved normalisation stays (it is part of the function being continued); the recorded input ranges
+    grow to cover ``lam_train`` (with its mirror images unless ``mirror`` is "none"). Samples the saved network
+    trained on may fall into the new validation and test splits: judge a continued network on held-out states.
+
+    Raises:
+        ValueError: weights of another robot, or not mirror-tied where ``mirror`` is "tied" (names both).
+    """
+    learned = LearnedMargin.load(source)
+    if learned.card.get("robot") != robot:
+        raise ValueError(f"--init {source} holds weights of {learned.card.get('robot')!r}, the data is of {robot!r}")
+    model = MarginMLP.from_weights(learned.params, mirror_tied=mirror == "tied")
+    if mirror != "none":
+        lam_train, _ = with_mirror_images(lam_train, np.zeros(len(lam_train)))
+    low = torch.as_tensor(lam_train.min(axis=0), dtype=model.lam_low.dtype)
+    high = torch.as_tensor(lam_train.max(axis=0), dtype=model.lam_high.dtype)
+    model.lam_low.copy_(torch.minimum(model.lam_low, low))
+    model.lam_high.copy_(torch.maximum(model.lam_high, high))
+    return model, {"source": str(source), "sha256": learned.card.get("sha256")}
 
 
 def mean_squared_error(model: MarginMLP, lam: torch.Tensor, margin: torch.Tensor, batch: int = 65536) -> float:
@@ -423,7 +455,12 @@ def train(
     data_in = model_inputs(lam, config, constants)
     x, target = data_in.inputs, margin - data_in.offset  # the network learns the residual over the offset
     torch.manual_seed(config.seed)  # the initial weights
-    model = build_model(x[split.train], target[split.train], config.mirror, architecture_widths(config.architecture))
+    if config.init is None:
+        widths = architecture_widths(config.architecture)
+        model = build_model(x[split.train], target[split.train], config.mirror, widths)
+        init_record = None
+    else:
+        model, init_record = continued_model(config.init, robot, x[split.train], config.mirror)
     x_fit, target_fit = training_split(x[split.train], target[split.train], config)
     summary = fit(model, x_fit, target_fit, x[split.val], target[split.val], config, logdir, progress)
     weights = to_margin_weights(model, config, constants)
@@ -471,6 +508,7 @@ def train(
         "package_commit": git_commit(),
         "training_command": command,
         "training": {**config.__dict__, **summary},
+        **({"continued_from": init_record} if init_record is not None else {}),
         "test_metrics": metrics,
         "gradient_check": grad,
         "paper_protocol": protocol,
@@ -517,6 +555,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--device", default=defaults.device, help="torch device of the fit, e.g. cuda")
     parser.add_argument("--max-seconds", type=float, default=None, help="wall-time budget of the fit [s]")
+    parser.add_argument(
+        "--init",
+        default=None,
+        metavar="WEIGHTS",
+        help="continue from saved weights (robot name or .npz with its card) instead of a fresh network",
+    )
     parser.add_argument("--seed", type=int, default=defaults.seed)
     parser.add_argument("--max-samples", type=int, default=None)
     parser.add_argument("--grad-check-states", type=int, default=defaults.grad_check_states)
@@ -548,6 +592,7 @@ def main(argv: list[str] | None = None) -> int:
         target=args.target,
         device=args.device,
         max_seconds=args.max_seconds,
+        init=args.init,
     )
     arguments = " ".join(shlex.quote(a) for a in (argv or sys.argv[1:]))
     command = f"python -m margin_rl.stability.learned.training {arguments}"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -554,3 +555,71 @@ def test_bad_target_and_budget_are_refused(field: str, value: object, message: s
 
     with pytest.raises(ValueError, match=message):
         check_config(TrainConfig(**{field: value}))
+
+
+# ----------------------------------------------------------------------------- continuing a fit from saved weights
+@pytest.mark.parametrize("mirror", ["none", "tied"])
+def test_saved_weights_become_the_same_trainable_network(mirror: str) -> None:
+    """from_weights inverts to_weights: the same dense matrices, the same outputs, and the tied structure kept
+    (a tied network read back is still exactly mirror-invariant after a gradient step)."""
+    from margin_rl.stability.analytic.lambda_state import mirror_lambda
+    from margin_rl.stability.learned.training import build_model
+
+    rng = np.random.default_rng(3)
+    lam = rng.normal(size=(300, 47))
+    torch.manual_seed(2)
+    original = build_model(lam, rng.normal(size=300), mirror=mirror)
+    saved = original.to_weights()
+    restored = MarginMLP.from_weights(saved, mirror_tied=mirror == "tied")
+    for a, b in zip(restored.to_weights().weights, saved.weights, strict=True):
+        np.testing.assert_array_equal(a, b)
+    x = torch.as_tensor(lam[:20], dtype=torch.float32)
+    torch.testing.assert_close(restored(x), original(x), rtol=0, atol=0)
+    loss = restored(x).square().sum()
+    loss.backward()
+    with torch.no_grad():
+        for p in restored.parameters():
+            p -= 0.1 * p.grad
+    moved = LearnedMargin(restored.to_weights())
+    assert np.abs(moved(lam[:20]) - LearnedMargin(saved)(lam[:20])).max() > 1e-4
+    if mirror == "tied":
+        np.testing.assert_allclose(moved(lam[:20]), moved(mirror_lambda(lam[:20])), rtol=0, atol=1e-6)
+
+
+def test_untied_or_physics_weights_are_refused_as_tied() -> None:
+    plain = random_weights(0)
+    plain = MarginWeights(**{**plain.__dict__, "input_mean": np.zeros(47), "input_std": np.ones(47)})
+    with pytest.raises(ValueError, match="not mirror-tied"):
+        MarginMLP.from_weights(plain, mirror_tied=True)
+    with pytest.raises(ValueError, match="paper network"):
+        MarginMLP.from_weights(random_physics_weights(), mirror_tied=False)
+
+
+def test_training_continues_saved_weights(tmp_path: Path) -> None:
+    """--init: the continued network starts from the saved one (one small-rate step moves it a little, it is not
+    refitted), keeps the saved normalisation, widens the input ranges to the new data, records what it
+    continued, and refuses weights of another robot or another architecture."""
+    from margin_rl.stability.analytic.margin import AnalyticSettings
+    from margin_rl.stability.learned.dataset import DatasetSpec, generate
+    from margin_rl.stability.learned.training import TrainConfig, train
+
+    first, more = tmp_path / "a", tmp_path / "b"
+    generate(DatasetSpec("anymal_b", 120, 60, 0, AnalyticSettings()), first, workers=1, progress=False)
+    generate(DatasetSpec("anymal_b", 120, 60, 5, AnalyticSettings()), more, workers=1, progress=False)
+    config = TrainConfig(epochs=2, grad_check_states=0, protocol_states=0, mirror="tied")
+    first_card = train(first, tmp_path / "w0", config, progress=False)
+    saved = LearnedMargin.load(tmp_path / "w0.npz")
+    continued = dataclasses.replace(config, init=str(tmp_path / "w0.npz"), lr=1e-4, epochs=1)
+    card = train([first, more], tmp_path / "w1", continued, progress=False)
+    assert card["continued_from"] == {"source": str(tmp_path / "w0.npz"), "sha256": first_card["sha256"]}
+    result = LearnedMargin.load(tmp_path / "w1.npz")
+    np.testing.assert_array_equal(result.params.input_mean, saved.params.input_mean)
+    assert result.params.output_std == saved.params.output_std
+    assert np.all(result.params.lam_low <= saved.params.lam_low)
+    assert np.all(result.params.lam_high >= saved.params.lam_high)
+    lam = np.random.default_rng(0).normal(size=(50, 47)) * saved.params.input_std + saved.params.input_mean
+    assert 0 < np.abs(result(lam) - saved(lam)).max() < 0.05  # moved by a small-rate epoch, not refitted
+    with pytest.raises(ValueError, match="holds weights of 'anymal_c'"):
+        train(first, tmp_path / "w2", dataclasses.replace(continued, init="anymal_c"), progress=False)
+    with pytest.raises(ValueError, match="paper network only"):
+        train(first, tmp_path / "w3", dataclasses.replace(continued, architecture="physics"), progress=False)

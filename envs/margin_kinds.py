@@ -9,7 +9,7 @@ The analytic kind is the extended margin m_x (:mod:`margin_rl.stability.analytic
 Region exists, and where it does not (no equilibrium, no contact) the margin of the relaxed load minus a
 penalty, or the ICP's distance to the support hull, so the reward keeps a slope there instead of the floor.
 Only unreachable feet, a solver error or an invalid lambda get the floor. The bundled learned weights (v2 and
-v3) are trained on m_x too (their card's ``dataset.target``); weights trained on m_a alone extrapolate there.
+later) are trained on m_x too (their card's ``dataset.target``); weights trained on m_a alone extrapolate there.
 """
 
 from __future__ import annotations

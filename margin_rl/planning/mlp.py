@@ -40,12 +40,11 @@ from margin_rl.stability import LAMBDA_DIM, LearnedMargin
 def planning_weights(robot_name: str) -> str:
     """The bundled learned-margin weights the planner uses for ``robot_name``: the robot's default network.
 
-    One network per robot serves the environments, the planner and users. The default (learned margin v3) is
-    trained on Table I and on the neighbourhoods of walking policies' states, and is closer to the analytic margin
-    on Table I states than the v2 network it replaced (its card's ``paper_protocol``). Along the planner's courses
-    the analytic margin stays within 1 cm of the bound at every sampled instant; ANYmal B's plans walk slower than
-    with the Table I network the planner used before (BENCHMARKS.md, "Trajectory optimisation plans"), which stays
-    loadable as ``<robot>_table_i`` (``--weights``).
+    One network per robot serves the environments, the planner and users. The default (learned margin v4) is
+    trained on Table I and on the neighbourhoods of walking policies' states. Along the planner's courses the
+    analytic margin stays above the bound at every sampled instant and every course reaches its goal (BENCHMARKS.md,
+    "Trajectory optimisation plans"); the Table I network the planner used before stays loadable as
+    ``<robot>_table_i`` (``--weights``).
     """
     return robot_name
 

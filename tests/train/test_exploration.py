@@ -97,3 +97,18 @@ def test_training_with_noise_that_clips_most_actions_warns_and_rsl_records_the_s
 def test_an_rsl_run_records_its_last_action_std(rsl_run: Path) -> None:
     saved = torch.load(rsl_run / "final_model.pt", weights_only=True)
     assert 0.9 < saved["infos"]["action_std"] < 1.1  # init_noise_std 1.0, two tiny updates
+
+
+def test_resuming_a_finished_rsl_run_keeps_its_action_std(rsl_run: Path, toy_weights: str, tmp_path: Path) -> None:
+    """A resume that adds no iteration (e.g. to name the learned-margin weights the run started with) saves the
+    final model again with the std the run had reached, not without it."""
+    import shutil
+
+    from margin_rl.train.commands.train import main
+
+    run_dir = tmp_path / "finished"
+    shutil.copytree(rsl_run, run_dir)
+    before = torch.load(run_dir / "final_model.pt", weights_only=True)["infos"]["action_std"]
+    assert main(["--resume", str(run_dir), "--margin-weights", toy_weights, "--no-progress"]) == 0
+    after = torch.load(run_dir / "final_model.pt", weights_only=True)["infos"]["action_std"]
+    assert before is not None and after == before

@@ -249,6 +249,8 @@ class CheckpointingRunner(OnPolicyRunner):
         self.logger.tot_time = float(infos.get("elapsed_s", 0.0))
         torch.set_rng_state(infos["torch_rng_state"])
         self.adapter.core.rng.bit_generator.state = infos["numpy_rng_state"]
+        # the std the run had reached: what a resume that adds no iteration (a finished run) saves again
+        self.exploration.last_mean_std = infos.get("action_std")
 
     def warm_start(self, path: Path) -> None:
         """Begin with the actor and critic (and their observation normalisers) of a trained model.

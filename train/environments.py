@@ -111,7 +111,7 @@ def check_margin_available(config: EnvConfig) -> None:
 def margin_identity(config: EnvConfig) -> dict[str, Any] | None:
     """Which learned margin an environment of ``config`` computes: ``{"source": robot name or weights path,
     "sha256": of the weights}``, or None without a learned margin. A run records it when it starts, so that a
-    resumed session, a bundle or an evaluation can tell when the robot's default weights changed since."""
+    resumed run, a bundle or an evaluation can tell when the robot's default weights changed since."""
     if config.margin != "learned":
         return None
     return weights_identity(config.margin_weights or config.robot)

@@ -280,7 +280,7 @@ def check_init_from(path: str, backend: str) -> None:
 def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) -> Path:
     """``config.json``: the spec, the exact backend settings, versions, time and command line.
 
-    A resumed run keeps its first command and start time and lists the later sessions' commands.
+    A resumed run keeps its first command and start time and lists the later ``train`` calls' commands.
     """
     now = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     data = {
@@ -293,9 +293,9 @@ def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) 
     }
     path = run_dir / CONFIG_FILE
     previous = read_json(path) if path.is_file() else {}
-    if spec.init_from is not None:  # what the run started from: a resumed run keeps the first session's checksum
+    if spec.init_from is not None:  # what the run started from: a resumed run keeps the first call's checksum
         data["init_from_sha256"] = previous.get("init_from_sha256") or sha256_file(spec.init_from)
-    # the learned margin's identity is the first session's: the weights a run started with are the ones it is
+    # the learned margin's identity is the first call's: the weights a run started with are the ones it is
     # trained and bundled with (runs recorded before this field existed fall back to the current weights)
     data["learned_margin"] = previous.get("learned_margin") or margin_identity(spec.env_config)
     if previous:
@@ -306,7 +306,7 @@ def write_run_config(spec: TrainSpec, run_dir: Path, command: list[str] | None) 
 
 
 def check_same_margin(spec: TrainSpec, run_dir: Path) -> None:
-    """A resumed run must compute the learned margin its first session computed.
+    """A resumed run must compute the learned margin its first ``train`` call computed.
 
     Raises:
         ValueError: the weights recorded in ``config.json`` (e.g. the robot's default network when the run

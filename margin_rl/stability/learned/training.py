@@ -242,8 +242,8 @@ def continued_model(
     if learned.card.get("robot") != robot:
         raise ValueError(f"--init {source} holds weights of {learned.card.get('robot')!r}, the data is of {robot!r}")
     model = MarginMLP.from_weights(learned.params, mirror_tied=mirror == "tied")
-    if mirror != "none":
-        lam_train, _ = with_mirror_images(lam_train, np.zeros(len(lam_train)))
+    if mirror != "none":  # the ranges of what the network is trained for, mirror images included
+        lam_train = np.concatenate([lam_train, mirror_inputs(lam_train)])
     low = torch.as_tensor(lam_train.min(axis=0), dtype=model.lam_low.dtype)
     high = torch.as_tensor(lam_train.max(axis=0), dtype=model.lam_high.dtype)
     model.lam_low.copy_(torch.minimum(model.lam_low, low))

@@ -502,7 +502,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--update-threads",
         type=int,
         default=None,
-        help="torch threads inside the PPO update (default: the cores this process may run on)",
+        help="torch threads inside the PPO update (default: the cores this process may run on); with several "
+        "trainings on one machine give each its share of the cores (1 for two runs on two cores: the default's "
+        "threads spin against the other run's and its updates took 7x longer)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="also print the backend's own logs")

@@ -11,7 +11,7 @@ modules (:mod:`~margin_rl.stability.learned.margin_mlp`) use, so that neither im
   gives the numpy, torch and CasADi forms);
 * the bundled files: :func:`weights_dir`, :func:`bundled_robots`, :func:`bundled_weights`, :func:`weights_path`
   (``"<robot>"``: the default network of the environments and the planner, trained on Table I and on the
-  states walking policies visit (learned margin v4); ``"<robot>_table_i"``: the network trained on seed 000's
+  states walking policies visit (learned margin v5); ``"<robot>_table_i"``: the network trained on seed 000's
   Table I alone, the v1 default, kept as named historical weights);
 * :func:`save_weights` (``<path>.npz`` and its model card ``<path>.json``), :func:`layout_signature`,
   :data:`WEIGHTS_FORMAT` and :class:`WeightsError`.

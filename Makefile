@@ -1,7 +1,8 @@
 # Two commands do all setup on a fresh machine:
 #   make demo   create .venv if missing, install torch (CPU) then margin_rl, run the main job (evaluate the
 #               bundled ANYmal B and C policies: comparison table and plot, push recovery, in results/<bundle>)
-#   make test   same setup, then ruff and the full test suite
+#   make test   same setup, then ruff and the full test suite (the MuJoCo Warp backend's tests run on Warp's CPU
+#               device; its kernels compile on first use into ~/.cache/warp)
 # torch is installed first and explicitly: on these machines `torch==2.13.0` is a local CPU wheel,
 # while any other torch request (e.g. pulled in by a dependency) downloads GBs of CUDA packages.
 
@@ -31,7 +32,7 @@ gl-deps:
 
 $(STAMP): $(PY) pyproject.toml | gl-deps
 	$(PY) -m pip install -q "$(TORCH_SPEC)"
-	$(PY) -m pip install -q -e ".[dev]"
+	$(PY) -m pip install -q -e ".[dev,gpu]"
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -10,7 +10,9 @@ Map::
 
     anymal.py, vector.py     the single and the batched Gymnasium env (the public surface)
     core.py                  AnymalCore: the batched simulation and its step, stage by stage
-    physics.py               MujocoBatchPhysics: every call of the core into the simulator (the seam)
+    physics.py               the seam: PhysicsBackend (the contract) and MujocoBatchPhysics (mujoco.batch)
+    physics_warp.py          WarpPhysics: MuJoCo Warp behind the same seam (the optional gpu extra)
+    backends.py              the backends by name (physics="mujoco" | "warp") and make_physics
     step_data.py             the core's per-step records (state read, accelerations, step output)
     config.py                EnvConfig and its parts (frozen), reward presets and parameters
     margin_kinds.py          the margin kinds of the reward term, declared once

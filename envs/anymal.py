@@ -89,6 +89,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
+from margin_rl.envs.backends import PHYSICS_BACKENDS
 from margin_rl.envs.config import EnvConfig, check_int
 from margin_rl.envs.core import ACTION_BOUND, AnymalCore
 from margin_rl.envs.observations import observation_size, observation_structure
@@ -98,9 +99,17 @@ ACTION_SIZE = 12
 """One joint-position offset per joint (4 legs x HAA, HFE, KFE)."""
 
 
-def make_config(config: EnvConfig | None, robot: str, terrain: str, overrides: dict[str, Any]) -> EnvConfig:
+def make_config(
+    config: EnvConfig | None, robot: str, terrain: str, overrides: dict[str, Any], owner: str = "AnymalEnv"
+) -> EnvConfig:
     """The environment config: ``config`` (or the defaults for robot/terrain) with keyword overrides (a mapping
-    for ``reward_params`` changes the keys it names)."""
+    for ``reward_params`` changes the keys it names).
+
+    Raises:
+        TypeError: an override that is no EnvConfig field, worded as Python words it (``<owner>.__init__() got an
+            unexpected keyword argument 'x'``, so that a client probing optional keywords by that message can
+            retry without it), followed by the valid fields.
+    """
     if config is not None and not isinstance(config, EnvConfig):
         raise TypeError(
             f"config must be an EnvConfig or None, got {type(config).__name__}; pass config=EnvConfig(...) "
@@ -110,8 +119,9 @@ def make_config(config: EnvConfig | None, robot: str, terrain: str, overrides: d
     unknown = sorted(set(overrides) - set(EnvConfig.__dataclass_fields__))
     if unknown:
         raise TypeError(
-            f"unknown environment options {unknown}; EnvConfig fields: {sorted(EnvConfig.__dataclass_fields__)}"
-            f"{EnvConfig.unknown_field_hint(unknown)}"
+            f"{owner}.__init__() got an unexpected keyword argument {unknown[0]!r}"
+            f"{f' (and {unknown[1:]})' if unknown[1:] else ''}; the environment options are the EnvConfig fields "
+            f"{sorted(EnvConfig.__dataclass_fields__)}{EnvConfig.unknown_field_hint(unknown)}"
         )
     return base.replace(**overrides) if overrides else base
 
@@ -280,9 +290,12 @@ class AnymalEnv(gymnasium.Env):
         render_mode: str | None = None,
         width: int = 640,
         height: int = 480,
+        physics: str = PHYSICS_BACKENDS[0],
+        physics_device: str | None = None,
+        physics_options: dict[str, Any] | None = None,
         **overrides: Any,
     ) -> None:
-        self.config = make_config(config, robot, terrain, overrides)
+        self.config = make_config(config, robot, terrain, overrides, type(self).__name__)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         check_frame_size(width, height)
@@ -290,7 +303,15 @@ class AnymalEnv(gymnasium.Env):
             require_display()
         # The env truncates its own episodes at EnvConfig.episode_length_s (the ids carry no TimeLimit), so a
         # shorter or longer episode_length_s given to gymnasium.make is the length the agent sees.
-        self.core = AnymalCore(self.config, num_envs=1, autoreset=False, truncate=True)
+        self.core = AnymalCore(
+            self.config,
+            num_envs=1,
+            autoreset=False,
+            truncate=True,
+            physics=physics,
+            physics_device=physics_device,
+            physics_options=physics_options,
+        )
         self.metadata = {**self.metadata, "render_modes": available_render_modes(), "render_fps": round(1.0 / self.dt)}
         self.observation_space = spaces.Box(-np.inf, np.inf, (observation_size(),), np.float32)
         self.action_space = spaces.Box(-ACTION_BOUND, ACTION_BOUND, (ACTION_SIZE,), np.float32)

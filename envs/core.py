@@ -1,7 +1,8 @@
 """The batched ANYmal simulation behind every environment adapter (single, vector, SB3, rsl-rl).
 
 One :class:`AnymalCore` steps ``num_envs`` MuJoCo simulations (through its physics seam,
-:class:`~margin_rl.envs.physics.MujocoBatchPhysics`: ``mujoco.batch.Batch`` on a native thread pool), evaluates
+:class:`~margin_rl.envs.physics.PhysicsBackend`: ``mujoco.batch.Batch`` on a native thread pool by default, or
+MuJoCo Warp with ``physics="warp"``, :mod:`margin_rl.envs.physics_warp`), evaluates
 the stability margin once per batch per step, and autoresets finished environments in the same step (their last
 observation is returned separately). Robot names (bodies, sensors, keyframe, the qpos/qvel layout) come from
 :mod:`margin_rl.robot.mjcf_names`.
@@ -11,8 +12,9 @@ observation is returned separately). Robot names (bodies, sensors, keyframe, the
 1. ``_actuate``: action a in [-1, 1]^12 (clipped; NaN raises) -> position-servo targets
    ctrl = ctrl_standing + s a (ctrl_standing: the keyframe's equilibrium targets, so a = 0 holds the
    standing pose); pushes written to the base (xfrc_applied);
-2. ``_simulate``: ``decimation`` physics steps at the MJCF timestep, and the divergence check
-   (:meth:`_invalid_state` before and after the step, and a clock that did not advance);
+2. ``_simulate``: ``decimation`` physics steps at the MJCF timestep, the backend's buffer check
+   (``check_overflow``: Warp's fixed contact buffers) and the divergence check (:meth:`_invalid_state` before and
+   after the step, and a clock that did not advance);
 3. ``_measure``: the world-frame state (:class:`SimulationState`) from the batch's arrays;
 4. ``_estimate_accelerations``: CoM, base angular and joint accelerations by finite differences over
    the policy step (20 ms: the mean acceleration over the step, exact on average), the first two
@@ -38,15 +40,16 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, make_physics
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
-from margin_rl.envs.margin_kinds import make_margin_function
+from margin_rl.envs.margin_kinds import MARGIN_KINDS, make_margin_function
 from margin_rl.envs.observations import (
     FOOT_HEIGHT_OFFSETS,
     POLICY_OBSERVATIONS,
     PRIVILEGED_OBSERVATIONS,
     assemble,
 )
-from margin_rl.envs.physics import MujocoBatchPhysics
+from margin_rl.envs.physics import PhysicsBackend
 from margin_rl.envs.rewards import compute_rewards
 from margin_rl.envs.scene import build_model
 from margin_rl.envs.stability_input import (
@@ -83,6 +86,18 @@ DIVERGED_SPEED = 1e3
 """A generalised velocity above this (m/s, rad/s) marks a simulation as diverged."""
 
 
+def check_margin_runs_on(kind: str, physics: str) -> None:
+    """ValueError where margin kind ``kind`` cannot run beside backend ``physics`` (the LP kinds solve on the
+    CPU, per environment: beside Warp they would undo what it is for)."""
+    if physics != PHYSICS_BACKENDS[0] and not MARGIN_KINDS[kind].batched:
+        usable = [name for name, k in MARGIN_KINDS.items() if k.batched]
+        raise ValueError(
+            f"margin={kind!r} solves linear programs on the CPU, one environment at a time, and is not offered with "
+            f"physics={physics!r}; use margin={usable[0]!r} (the learned margin, seed 000 §IV), another of {usable}, "
+            f"or physics={PHYSICS_BACKENDS[0]!r}"
+        )
+
+
 class AnymalCore:
     """Batched ANYmal environments (see the module docstring)."""
 
@@ -94,14 +109,26 @@ class AnymalCore:
     """What a pickled core carries besides its config, terrain and physics state (everything a step changes)."""
 
     def __init__(
-        self, config: EnvConfig, num_envs: int, seed: int | None = None, autoreset: bool = True, truncate: bool = True
+        self,
+        config: EnvConfig,
+        num_envs: int,
+        seed: int | None = None,
+        autoreset: bool = True,
+        truncate: bool = True,
+        physics: str = PHYSICS_BACKENDS[0],
+        physics_device: str | None = None,
+        physics_options: dict[str, Any] | None = None,
     ) -> None:
         """``autoreset``: reset finished environments inside :meth:`step` (vector semantics); ``truncate``:
-        end episodes at ``episode_length_s`` (off when a TimeLimit wrapper does it)."""
+        end episodes at ``episode_length_s`` (off when a TimeLimit wrapper does it); ``physics``,
+        ``physics_device``, ``physics_options``: the simulator behind the seam, where it computes and its own
+        settings (:func:`~margin_rl.envs.physics.make_physics`); not EnvConfig fields, so that a run made with one
+        backend evaluates and resumes with another."""
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         terrain = flat_terrain() if config.terrain == "flat" else rough_terrain(config.terrain_config, seed or 0)
-        self._build(config, num_envs, autoreset, truncate, terrain)
+        backend = PhysicsChoice(physics, physics_device, dict(physics_options or {}))
+        self._build(config, num_envs, autoreset, truncate, terrain, backend)
         self.rng = np.random.default_rng(seed)
         self._added_mass = np.zeros(num_envs)
         if config.randomization.added_base_mass is not None:
@@ -127,15 +154,25 @@ class AnymalCore:
         self._last_margin = np.zeros(n)
         self._last_lambda = np.zeros((n, LAMBDA_DIM))
 
-    def _build(self, config: EnvConfig, num_envs: int, autoreset: bool, truncate: bool, terrain: Terrain) -> None:
-        """Everything that follows from the config and the terrain: robot, model, physics, ids, margin."""
+    def _build(
+        self,
+        config: EnvConfig,
+        num_envs: int,
+        autoreset: bool,
+        truncate: bool,
+        terrain: Terrain,
+        backend: PhysicsChoice,
+    ) -> None:
+        """Everything that follows from the config, the terrain and the backend: robot, model, physics, ids, margin."""
+        check_margin_runs_on(config.margin, backend.name)
         self.config = config
+        self.backend = backend
         self.num_envs = num_envs
         self.autoreset, self.truncate = autoreset, truncate
         self.robot = load_robot(config.robot)
         self.terrain = terrain
         self.model = build_model(self.robot, self.terrain, config.terrain_config)
-        self.physics = MujocoBatchPhysics(self.model, num_envs)
+        self.physics: PhysicsBackend = make_physics(backend.name, self.model, num_envs, backend.device, backend.options)
         physics, legs = self.physics, self.robot.leg_names
         self.dt = float(physics.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
@@ -161,7 +198,7 @@ class AnymalCore:
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
         state = {name: getattr(self, name) for name in self._STATE}
-        state["_setup"] = (self.config, self.num_envs, self.autoreset, self.truncate, self.terrain)
+        state["_setup"] = (self.config, self.num_envs, self.autoreset, self.truncate, self.terrain, self.backend)
         state["_physics"] = self.physics.get_state()
         return state
 
@@ -353,6 +390,7 @@ class AnymalCore:
         diverged = self._invalid_state()
         time_before = physics.time.copy()
         failed = physics.step(self.config.decimation)
+        physics.check_overflow()  # dropped contacts would make every later step of a world wrong: stop here
         diverged[failed] = True  # a simulation failed: end its episode, keep the others
         expected = time_before + self.config.decimation * physics.timestep
         diverged |= np.abs(physics.time - expected) > 0.5 * physics.timestep

@@ -21,8 +21,6 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from margin_rl.robot import Robot
-from margin_rl.stability.analytic.extended import extended_margin_batch
-from margin_rl.stability.fwp.feasibility import fwp_feasibility
 from margin_rl.stability.learned.model import LearnedMargin
 
 MarginFunction = Callable[[np.ndarray], np.ndarray]
@@ -70,6 +68,8 @@ def _learned_margin(robot: Robot, weights: str | None, floor: float) -> MarginFu
 
 def _analytic_margin(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
     """m_x of the whole batch in one call (one contact problem, one solver per stance structure)."""
+    # Loaded here, not with the module: the LP solvers (Clarabel) are not needed by the learned margin's path.
+    from margin_rl.stability.analytic.extended import extended_margin_batch
 
     def analytic(lam: np.ndarray) -> np.ndarray:
         # A diverged simulation's lambda (non-finite) gets the floor; the env builds every other field
@@ -84,6 +84,8 @@ def _analytic_margin(robot: Robot, weights: str | None, floor: float) -> MarginF
 
 
 def _fwp_factor(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
+    from margin_rl.stability.fwp.feasibility import fwp_feasibility  # the LP solvers, loaded only for this kind
+
     return _per_state(lambda x: fwp_feasibility(robot, x).s, floor)
 
 
@@ -95,13 +97,18 @@ class MarginKind:
     description: str
     unit: str
     build: Callable[[Robot, str | None, float], MarginFunction]
+    batched: bool  # one array computation for the whole batch (what a GPU backend can run), not LPs per env
 
 
 MARGIN_KINDS: dict[str, MarginKind] = {
     kind.name: kind
     for kind in (
         MarginKind(
-            "learned", "the learned margin MLP of seed 000 §IV (batched, ~10 us per env step)", "m", _learned_margin
+            "learned",
+            "the learned margin MLP of seed 000 §IV (batched, ~10 us per env step)",
+            "m",
+            _learned_margin,
+            True,
         ),
         MarginKind(
             "analytic",
@@ -109,14 +116,16 @@ MARGIN_KINDS: dict[str, MarginKind] = {
             "(margin_rl.stability.analytic.extended; per env, ~2-15 ms per env step: validation)",
             "m",
             _analytic_margin,
+            False,
         ),
         MarginKind(
             "fwp",
             "the feasible-wrench-polytope feasibility factor s of seed 004 (per env, ~4-12 ms per env step)",
             "dimensionless (s <= 1, a relative depth in the wrench polytope)",
             _fwp_factor,
+            False,
         ),
-        MarginKind("none", "no margin: the term is zero", "-", _no_margin),
+        MarginKind("none", "no margin: the term is zero", "-", _no_margin, True),
     )
 }
 """Margin kinds by name (``EnvConfig.margin``, ``--margin``)."""

@@ -1,25 +1,26 @@
 """The physics seam of :class:`~margin_rl.envs.core.AnymalCore`: every call it makes into the simulator.
 
-:class:`MujocoBatchPhysics` holds ``num_envs`` simulations of one MuJoCo model in ``mujoco.batch.Batch``
-(a native thread pool, results bit-identical to one ``MjData`` per simulation at any thread count). The core
-reads the state through the live arrays below, writes controls and external forces into them, and calls
-:meth:`~MujocoBatchPhysics.reset`, :meth:`~MujocoBatchPhysics.forward` and :meth:`~MujocoBatchPhysics.step`;
-model constants come from the lookups by name. Another backend (a GPU batch, a loop over ``MjData``) can sit
-behind the same members.
+:class:`PhysicsBackend` is the written contract; :class:`MujocoBatchPhysics` (this module, the default) and
+:class:`~margin_rl.envs.physics_warp.WarpPhysics` (MuJoCo Warp) satisfy it, and
+:func:`~margin_rl.envs.backends.make_physics` builds one by name. :class:`MujocoBatchPhysics` holds ``num_envs``
+simulations of one MuJoCo model in ``mujoco.batch.Batch`` (a native thread pool, results bit-identical to one
+``MjData`` per simulation at any thread count). The core reads the state through the live arrays below, writes
+controls and external forces into them, and calls ``reset``, ``forward`` and ``step``; model constants come from
+the lookups by name (:class:`ModelConstants`, shared by the backends).
 
 Live arrays, ``(num_envs, ...)``: ``qpos``, ``qvel``, ``ctrl``, ``xfrc_applied`` and ``time`` are the state
 (writes take effect at the next call); ``sensordata``, ``site_xpos``, ``xpos`` and ``actuator_force`` are
 outputs, refreshed by every call.
 
-:meth:`~MujocoBatchPhysics.get_state` and :meth:`~MujocoBatchPhysics.set_state` carry the whole integration
-state (including the solver's warm start) and the per-environment model fields, so that a restored copy steps
-to the same numbers (what pickling an environment needs).
+``get_state`` and ``set_state`` carry the whole integration state (including the solver's warm start) and the
+per-environment model fields, so that a restored copy steps to the same numbers (what pickling an environment
+needs).
 """
 
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import Any, Protocol
 
 import mujoco
 import numpy as np
@@ -37,24 +38,64 @@ def usable_cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-class MujocoBatchPhysics:
-    """``num_envs`` simulations of ``model`` in one ``mujoco.batch.Batch`` (see the module docstring)."""
+class PhysicsBackend(Protocol):
+    """The written contract of a physics backend: every member :class:`~margin_rl.envs.core.AnymalCore` uses.
 
-    def __init__(self, model: mujoco.MjModel, num_envs: int, nthread: int | None = None) -> None:
-        """``nthread``: threads of the batch; None: one per core this process may run on (:func:`usable_cores`).
-        (MuJoCo's nthread=0 would start one per core of the machine, so several trainings pinned to a few cores
-        each, with taskset or cgroups, would oversubscribe.)"""
-        self.model = model
-        self.num_envs = num_envs
-        self.batch = mj_batch.Batch(model, nsim=num_envs, nthread=usable_cores() if nthread is None else nthread)
-        bind = self.batch.bind
-        self.qpos, self.qvel, self.time = bind("qpos"), bind("qvel"), bind("time")
-        self.ctrl, self.xfrc_applied = bind("ctrl"), bind("xfrc_applied")
-        self.sensordata, self.site_xpos, self.xpos = bind("sensordata"), bind("site_xpos"), bind("xpos")
-        self.actuator_force = bind("actuator_force")
-        self._per_env_fields: dict[str, np.ndarray] = {}
+    Live arrays, ``(num_envs, ...)`` (numpy, writes take effect at the next call, outputs refreshed by every
+    call): ``qpos``, ``qvel``, ``ctrl``, ``xfrc_applied`` (``(num_envs, nbody, 6)``), ``time``; ``sensordata``,
+    ``site_xpos``, ``xpos``, ``actuator_force``. Model constants are read by name from ``model`` (the MjModel the
+    backend was built from). Both backends are checked against this protocol by the tests, member by member.
+    """
 
-    # ------------------------------------------------------------------ model constants
+    model: mujoco.MjModel
+    num_envs: int
+    qpos: np.ndarray
+    qvel: np.ndarray
+    time: np.ndarray
+    ctrl: np.ndarray
+    xfrc_applied: np.ndarray
+    sensordata: np.ndarray
+    site_xpos: np.ndarray
+    xpos: np.ndarray
+    actuator_force: np.ndarray
+
+    @property
+    def timestep(self) -> float: ...
+    @property
+    def nv(self) -> int: ...
+    def body_id(self, name: str) -> int: ...
+    def site_id(self, name: str) -> int: ...
+    def geom_id(self, name: str) -> int: ...
+    def keyframe(self, name: str) -> tuple[int, np.ndarray, np.ndarray]: ...
+    def sensor_slice(self, name: str) -> slice: ...
+    def sensor_adr(self, name: str) -> int: ...
+    def body_mass(self, body: int) -> float: ...
+    def geom_friction(self, geom: int) -> float: ...
+    def per_env_field(self, name: str) -> np.ndarray: ...
+    def set_const(self) -> None: ...
+    def reset(self, ids: np.ndarray, keyframe: int) -> None: ...
+    def forward(self, ids: np.ndarray | None = None) -> None: ...
+    def step(self, nstep: int) -> np.ndarray: ...
+    def check_overflow(self) -> None: ...
+    def render_data(self, env: int) -> mujoco.MjData: ...
+    def get_state(self) -> dict[str, Any]: ...
+    def set_state(self, state: dict[str, Any]) -> None: ...
+
+
+def render_data(model: mujoco.MjModel, qpos: np.ndarray, qvel: np.ndarray) -> mujoco.MjData:
+    """An MjData of ``model`` at (qpos, qvel), forwarded by MuJoCo (for rendering one environment)."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    data.qvel[:] = qvel
+    mujoco.mj_forward(model, data)
+    return data
+
+
+class ModelConstants:
+    """The model constants a backend reads from its MjModel ``model``, by name (shared by every backend)."""
+
+    model: mujoco.MjModel
+
     @property
     def timestep(self) -> float:
         """Physics time step [s] (the MJCF's)."""
@@ -96,6 +137,24 @@ class MujocoBatchPhysics:
         """The model's sliding friction coefficient of ``geom``."""
         return float(self.model.geom_friction[geom, 0])
 
+
+class MujocoBatchPhysics(ModelConstants):
+    """``num_envs`` simulations of ``model`` in one ``mujoco.batch.Batch`` (see the module docstring)."""
+
+    def __init__(self, model: mujoco.MjModel, num_envs: int, nthread: int | None = None) -> None:
+        """``nthread``: threads of the batch; None: one per core this process may run on (:func:`usable_cores`).
+        (MuJoCo's nthread=0 would start one per core of the machine, so several trainings pinned to a few cores
+        each, with taskset or cgroups, would oversubscribe.)"""
+        self.model = model
+        self.num_envs = num_envs
+        self.batch = mj_batch.Batch(model, nsim=num_envs, nthread=usable_cores() if nthread is None else nthread)
+        bind = self.batch.bind
+        self.qpos, self.qvel, self.time = bind("qpos"), bind("qvel"), bind("time")
+        self.ctrl, self.xfrc_applied = bind("ctrl"), bind("xfrc_applied")
+        self.sensordata, self.site_xpos, self.xpos = bind("sensordata"), bind("site_xpos"), bind("xpos")
+        self.actuator_force = bind("actuator_force")
+        self._per_env_fields: dict[str, np.ndarray] = {}
+
     # ------------------------------------------------------------------ per-environment model fields
     def per_env_field(self, name: str) -> np.ndarray:
         """The live ``(num_envs, ...)`` per-environment values of model field ``name`` (``geom_friction``,
@@ -128,13 +187,13 @@ class MujocoBatchPhysics:
             return np.asarray(exc.ids, dtype=np.int64)
         return np.zeros(0, dtype=np.int64)
 
+    def check_overflow(self) -> None:
+        """Nothing to check: MuJoCo grows its contact and constraint arena as needed (a full arena raises in
+        :meth:`step`, reported as failed simulations)."""
+
     def render_data(self, env: int) -> mujoco.MjData:
         """An MjData with simulation ``env``'s positions and velocities, forwarded (for rendering)."""
-        data = mujoco.MjData(self.model)
-        data.qpos[:] = self.qpos[env]
-        data.qvel[:] = self.qvel[env]
-        mujoco.mj_forward(self.model, data)
-        return data
+        return render_data(self.model, self.qpos[env], self.qvel[env])
 
     # ------------------------------------------------------------------ state
     def get_state(self) -> dict[str, Any]:

@@ -64,6 +64,7 @@ from margin_rl.envs.anymal import (
     check_seed,
     make_config,
 )
+from margin_rl.envs.backends import PHYSICS_BACKENDS
 from margin_rl.envs.config import EnvConfig, check_int
 from margin_rl.envs.core import ACTION_BOUND, AnymalCore
 from margin_rl.envs.observations import observation_size, observation_structure
@@ -143,11 +144,14 @@ class AnymalVectorEnv(VectorEnv):
         width: int = 640,
         height: int = 480,
         autoreset_mode: AutoresetMode | str = AUTORESET_MODES[0],
+        physics: str = PHYSICS_BACKENDS[0],
+        physics_device: str | None = None,
+        physics_options: dict[str, Any] | None = None,
         **overrides: Any,
     ) -> None:
         check_int("num_envs", num_envs, minimum=1, hint="environments in the batch")
         self.autoreset_mode = check_autoreset_mode(autoreset_mode)
-        config = make_config(config, robot, terrain, overrides)
+        config = make_config(config, robot, terrain, overrides, type(self).__name__)
         if max_episode_steps is not None:
             check_int("max_episode_steps", max_episode_steps, minimum=1, hint="policy steps per episode, or None")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -158,7 +162,15 @@ class AnymalVectorEnv(VectorEnv):
         check_frame_size(width, height)
         seed = check_seed(seed, "seed")
         same_step = self.autoreset_mode == AutoresetMode.SAME_STEP
-        self.core = AnymalCore(config, num_envs=num_envs, seed=seed, autoreset=same_step)
+        self.core = AnymalCore(
+            config,
+            num_envs=num_envs,
+            seed=seed,
+            autoreset=same_step,
+            physics=physics,
+            physics_device=physics_device,
+            physics_options=physics_options,
+        )
         if max_episode_steps is not None:
             self.core.max_episode_steps = int(max_episode_steps)
         self.num_envs = num_envs

@@ -202,3 +202,25 @@ def test_no_module_imports_itself_in_a_circle() -> None:
         if module not in state:
             visit(module, [module])
     assert not cycles, "modules that import each other (at load time or lazily):\n" + "\n".join(cycles)
+
+
+def test_the_gpu_training_path_loads_no_pinocchio_casadi_or_clarabel() -> None:
+    """The environments with the learned margin, the rsl-rl backend and the train command run on a machine that has
+    only mujoco, mujoco-warp, warp-lang, gymnasium, rsl-rl-lib and tensordict beside torch: Pinocchio, CasADi and
+    Clarabel load where the analytic margin, the planners or the crawl need them, not before."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, numpy as np, gymnasium as gym, margin_rl\n"
+        "import margin_rl.train.commands.train\n"
+        "from margin_rl.train import make_rsl_env\n"
+        "env = make_rsl_env('margin_rl/AnymalC-v1', 2, seed=0)\n"
+        "vec = gym.make_vec('margin_rl/AnymalB-v1', num_envs=2)\n"
+        "vec.reset(seed=0); vec.step(np.zeros((2, 12)))\n"
+        "loaded = [m for m in ('pinocchio', 'casadi', 'clarabel') if m in sys.modules]\n"
+        "assert not loaded, f'the GPU training path imported {loaded}'\n"
+        "from margin_rl.stability import analytic_margin\n"
+        "assert 'clarabel' in sys.modules  # loaded on first use of a name that needs it\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=300)

@@ -2,7 +2,7 @@
 
 Usage:
     python benchmarks/speed/bench_env.py [--env margin_rl/AnymalB-v1] [--num-envs 64] [--steps 300] [--rounds 5]
-        [--json PATH]
+        [--warp-cpu] [--json PATH]
 
 Five configurations, measured in interleaved rounds in one run (round r measures all of them, one after the
 other), with the median over rounds and the ratios of medians printed as a Markdown table:
@@ -14,7 +14,8 @@ other), with the median over rounds and the ratios of medians printed as a Markd
   forward pass after the step (the env needs it: sensors, actuator forces and contacts of the new state).
 
 The last raw row is the physics cost of exactly what the env steps; the env's Python work (lambda, margin,
-rewards, observations, resets) is the difference.
+rewards, observations, resets) is the difference. ``--warp-cpu`` adds the env with the learned margin on the MuJoCo
+Warp backend on Warp's CPU device (``physics="warp", physics_device="cpu"``; its kernels compile on first use).
 """
 
 from __future__ import annotations
@@ -86,6 +87,7 @@ def main() -> None:
     args_parser.add_argument("--steps", type=int, default=300)
     args_parser.add_argument("--rounds", type=int, default=5)
     args_parser.add_argument("--margin-weights", default=None, help="weights .npz (default: bundled)")
+    args_parser.add_argument("--warp-cpu", action="store_true", help="add the env on MuJoCo Warp's CPU device")
     args = args_parser.parse_args()
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.3, 0.3, size=(args.steps, args.num_envs, 12)).astype(np.float32)
@@ -103,6 +105,10 @@ def main() -> None:
             args.env, args.num_envs, actions, mujoco.mjtStage.mjSTAGE_ACC
         ),
     }
+    if args.warp_cpu:
+        runners["env, learned margin, physics='warp' on Warp's CPU device"] = env_runner(
+            args.env, args.num_envs, actions, margin="learned", physics="warp", physics_device="cpu", **extra
+        )
     rates = {name: summarise(values) for name, values in interleave(runners, args.rounds).items()}
     names = list(runners)
     print(machine_line())
@@ -116,7 +122,7 @@ def main() -> None:
     with_margin, without = rates[names[0]].median, rates[names[1]].median
     overhead = 100 * (without / with_margin - 1)
     print(f"margin overhead (no margin / learned margin - 1): {overhead:.1f} %")
-    of_raw = {raw: 100 * with_margin / rates[raw].median for raw in names[2:]}
+    of_raw = {raw: 100 * with_margin / rates[raw].median for raw in names if raw.startswith("raw ")}
     for raw, share in of_raw.items():
         print(f"env with the learned margin / {raw}: {share:.0f} %")
     write_record(

@@ -9,12 +9,13 @@ Pinocchio's (x, y, z, w) order stays inside.
 from __future__ import annotations
 
 import functools
+import importlib
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 import mujoco
 import numpy as np
-import pinocchio as pin
 
 
 @dataclass(frozen=True)
@@ -24,6 +25,24 @@ class RigidBodyDynamics:
     bias_torques: np.ndarray  # (4, 3) delta_i [N m]
     ang_momentum_rate: np.ndarray  # (3,) rate of angular momentum about the CoM [N m]
     com: np.ndarray  # (3,) CoM relative to the base origin [m]
+
+
+@dataclass(frozen=True)
+class PinocchioModel:
+    """A robot's Pinocchio model, built from its MJCF on first use (:attr:`Robot.pin_model` and the rest), so that
+    code that never asks for rigid-body dynamics (the environments, the learned margin) never loads Pinocchio."""
+
+    model: Any  # pinocchio.Model, gravity from the MJCF
+    data: Any  # pinocchio.Data, reused by every call
+    foot_frames: tuple[int, ...]  # frame id of each <leg>_FOOT, leg order LEGS
+    leg_v_idx: tuple[tuple[int, ...], ...]  # (4, 3) tangent-vector indices of each leg's joints
+    joint_q_idx: np.ndarray  # (12,) configuration indices of the joints, in joint order
+
+
+@functools.cache
+def pinocchio() -> ModuleType:
+    """The ``pinocchio`` module, imported on first use (see :class:`PinocchioModel`)."""
+    return importlib.import_module("pinocchio")
 
 
 def _matrix_to_quat_wxyz(R: np.ndarray) -> np.ndarray:
@@ -138,7 +157,7 @@ class RobotDynamics:
 
     def _leg_jacobians_at(self, config: np.ndarray) -> np.ndarray:
         """:meth:`leg_jacobians` at a Pinocchio configuration (its base orientation sets the frame)."""
-        model, data = self.pin_model, self._pin_data
+        model, data, pin = self.pin_model, self._pin_data, pinocchio()
         pin.computeJointJacobians(model, data, config)
         pin.updateFramePlacements(model, data)
         out = np.empty((len(self.legs), 3, 3))
@@ -153,7 +172,7 @@ class RobotDynamics:
         """:meth:`rigid_body_dynamics` at a Pinocchio configuration whose base orientation is R."""
         c_ddot = np.zeros(3) if com_acc is None else np.asarray(com_acc, dtype=float)
         w_dot = np.zeros(3) if base_ang_acc is None else np.asarray(base_ang_acc, dtype=float)
-        model, data = self.pin_model, self._pin_data
+        model, data, pin = self.pin_model, self._pin_data, pinocchio()
         v = np.zeros(model.nv)
         com = np.array(pin.centerOfMass(model, data, config))  # base origin at 0, axes of W
         # w_dot x com, written out (np.cross has a large fixed overhead on 3-vectors).
@@ -192,4 +211,4 @@ class RobotDynamics:
 
     def _pin_com(self, joint_pos: np.ndarray) -> np.ndarray:
         """:meth:`com_position` without the argument check."""
-        return np.array(pin.centerOfMass(self.pin_model, self._pin_data, self._pin_q(joint_pos)))
+        return np.array(pinocchio().centerOfMass(self.pin_model, self._pin_data, self._pin_q(joint_pos)))

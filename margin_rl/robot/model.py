@@ -8,16 +8,16 @@ static-equilibrium servo target.
 
 from __future__ import annotations
 
+import functools
 import importlib.resources
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import mujoco
 import numpy as np
-import pinocchio as pin
 
-from margin_rl.robot.dynamics import RobotDynamics
+from margin_rl.robot.dynamics import PinocchioModel, RobotDynamics, pinocchio
 from margin_rl.robot.kinematics import LegGeometry, RobotKinematics, with_standing_knee_branch
 
 LEGS: tuple[str, ...] = ("LF", "RF", "LH", "RH")
@@ -68,7 +68,8 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)
 class Robot(RobotKinematics, RobotDynamics):
-    """One robot, as MuJoCo and Pinocchio models built from the same MJCF.
+    """One robot, as MuJoCo and Pinocchio models built from the same MJCF (Pinocchio's on first use of a dynamics
+    method or :attr:`pin_model`: :class:`~margin_rl.robot.dynamics.PinocchioModel`).
 
     Build it with :func:`load_robot`. Arrays are read-only; joint-indexed arrays have 12 entries in
     :attr:`joint_names` order (LF, RF, LH, RH x HAA, HFE, KFE).
@@ -78,7 +79,6 @@ class Robot(RobotKinematics, RobotDynamics):
     xml_path: Path
     scene_path: Path
     mj_model: mujoco.MjModel
-    pin_model: pin.Model
     joint_names: tuple[str, ...]
     total_mass: float  # [kg]
     gravity: float  # [m/s^2], magnitude of the MJCF's gravity
@@ -91,10 +91,32 @@ class Robot(RobotKinematics, RobotDynamics):
     foot_radius: float  # [m]
     standing_qpos: np.ndarray  # (19,) MuJoCo qpos of the 'standing' keyframe
     legs: tuple[LegGeometry, ...]
-    _pin_data: pin.Data = field(repr=False)
-    _pin_foot_frames: tuple[int, ...] = field(repr=False)
-    _pin_leg_v_idx: tuple[tuple[int, ...], ...] = field(repr=False)
-    _pin_joint_q_idx: np.ndarray = field(repr=False)
+
+    # ----------------------------------------------------------------- Pinocchio, built on first use
+    @functools.cached_property
+    def _pinocchio(self) -> PinocchioModel:
+        return build_pinocchio_model(self.xml_path, self.mj_model, self.joint_names)
+
+    @property
+    def pin_model(self) -> Any:
+        """The Pinocchio model (``pinocchio.Model``) of the same MJCF, gravity from the MJCF."""
+        return self._pinocchio.model
+
+    @property
+    def _pin_data(self) -> Any:
+        return self._pinocchio.data
+
+    @property
+    def _pin_foot_frames(self) -> tuple[int, ...]:
+        return self._pinocchio.foot_frames
+
+    @property
+    def _pin_leg_v_idx(self) -> tuple[tuple[int, ...], ...]:
+        return self._pinocchio.leg_v_idx
+
+    @property
+    def _pin_joint_q_idx(self) -> np.ndarray:
+        return self._pinocchio.joint_q_idx
 
     # ----------------------------------------------------------------- simple facts
     @property
@@ -249,11 +271,6 @@ def load_robot_from_xml(path: str | Path, name: str | None = None, scene_path: s
         model = mujoco.MjModel.from_xml_path(str(path))
     except ValueError as exc:  # MuJoCo reports XML and compile errors as ValueError
         raise RobotModelError(f"{path}: MuJoCo could not load this model: {exc}") from exc
-    try:
-        pin_model = pin.buildModelFromMJCF(str(path))
-    except Exception as exc:  # Pinocchio raises bare RuntimeErrors from C++
-        raise RobotModelError(f"{path}: Pinocchio could not load this model: {exc}") from exc
-
     joint_names = tuple(f"{leg}_{j}" for leg in LEGS for j in LEG_JOINTS)
     legs = [_leg_geometry(model, path, leg) for leg in LEGS]
     for i, jname in enumerate(joint_names):
@@ -275,25 +292,11 @@ def load_robot_from_xml(path: str | Path, name: str | None = None, scene_path: s
     forcerange = model.actuator_forcerange[: len(joint_names)]
     _require(np.allclose(forcerange[:, 0], -forcerange[:, 1]), path, "actuator force ranges must be symmetric")
 
-    # The MJCF is the source of truth for gravity too.
-    pin_model.gravity = pin.Motion(np.concatenate([model.opt.gravity, np.zeros(3)]))
-    pin_data = pin_model.createData()
-    foot_frames = []
-    for leg in LEGS:
-        fid = pin_model.getFrameId(f"{leg}_FOOT")
-        _require(fid < len(pin_model.frames), path, f"Pinocchio sees no frame {leg}_FOOT")
-        foot_frames.append(fid)
-    leg_v_idx = tuple(
-        tuple(pin_model.joints[pin_model.getJointId(f"{leg}_{j}")].idx_v for j in LEG_JOINTS) for leg in LEGS
-    )
-    joint_q_idx = np.array([pin_model.joints[pin_model.getJointId(n)].idx_q for n in joint_names])
-
     return Robot(
         name=name or path.stem,
         xml_path=path,
         scene_path=Path(scene_path) if scene_path is not None else path,
         mj_model=model,
-        pin_model=pin_model,
         joint_names=joint_names,
         total_mass=float(model.body_subtreemass[model.body("base").id]),
         gravity=float(np.linalg.norm(model.opt.gravity)),
@@ -306,8 +309,26 @@ def load_robot_from_xml(path: str | Path, name: str | None = None, scene_path: s
         foot_radius=float(numeric("foot_radius")[0]),
         standing_qpos=_readonly(standing_qpos),
         legs=tuple(legs),
-        _pin_data=pin_data,
-        _pin_foot_frames=tuple(foot_frames),
-        _pin_leg_v_idx=leg_v_idx,
-        _pin_joint_q_idx=joint_q_idx,
     )
+
+
+def build_pinocchio_model(path: Path, model: mujoco.MjModel, joint_names: tuple[str, ...]) -> PinocchioModel:
+    """The Pinocchio model of the MJCF at ``path`` (``model``: MuJoCo's of the same file, for gravity), checked
+    against the conventions; :class:`RobotModelError` naming the file where Pinocchio cannot load it."""
+    pin = pinocchio()
+    try:
+        pin_model = pin.buildModelFromMJCF(str(path))
+    except Exception as exc:  # Pinocchio raises bare RuntimeErrors from C++
+        raise RobotModelError(f"{path}: Pinocchio could not load this model: {exc}") from exc
+    # The MJCF is the source of truth for gravity too.
+    pin_model.gravity = pin.Motion(np.concatenate([model.opt.gravity, np.zeros(3)]))
+    foot_frames = []
+    for leg in LEGS:
+        fid = pin_model.getFrameId(f"{leg}_FOOT")
+        _require(fid < len(pin_model.frames), path, f"Pinocchio sees no frame {leg}_FOOT")
+        foot_frames.append(fid)
+    leg_v_idx = tuple(
+        tuple(pin_model.joints[pin_model.getJointId(f"{leg}_{j}")].idx_v for j in LEG_JOINTS) for leg in LEGS
+    )
+    joint_q_idx = np.array([pin_model.joints[pin_model.getJointId(n)].idx_q for n in joint_names])
+    return PinocchioModel(pin_model, pin_model.createData(), tuple(foot_frames), leg_v_idx, joint_q_idx)

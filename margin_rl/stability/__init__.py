@@ -11,7 +11,12 @@ Four sub-packages, importing downwards only (each one's docstring has its map)::
 build on both. The names below are the layer's public face.
 """
 
-from margin_rl.stability.analytic.extended import ExtendedMargins, extended_margin, extended_margin_batch
+import importlib
+from typing import Any
+
+# lambda's layout and the learned margin load with the package (numpy only); the names below need the conic
+# solvers (Clarabel) and load on first use, so that the environments and the learned margin's training path
+# import no LP solver.
 from margin_rl.stability.analytic.lambda_state import (
     LAMBDA_DIM,
     LAMBDA_FIELDS,
@@ -20,21 +25,36 @@ from margin_rl.stability.analytic.lambda_state import (
     from_lambda,
     lambda_names,
 )
-from margin_rl.stability.analytic.margin import (
-    STATUSES,
-    AnalyticMarginResult,
-    AnalyticSettings,
-    BatchMargins,
-    analytic_margin,
-    analytic_margin_batch,
-)
-from margin_rl.stability.analytic.sampling import SAMPLER_VERSION, TableI, sample_states
-from margin_rl.stability.fwp.feasibility import FWPFeasibility, fwp_feasibility
-from margin_rl.stability.fwp.polytope import feasible_wrench_polytope
-from margin_rl.stability.geometry.contact import CentroidalLoad, ContactSet, LegLimits
-from margin_rl.stability.geometry.icp import capture_point, stability_margin
-from margin_rl.stability.geometry.region import FeasibleRegion, RegionSettings, feasible_region, solve_region
 from margin_rl.stability.learned.model import LearnedMargin
+
+_ON_FIRST_USE: dict[str, str] = {
+    **dict.fromkeys(("ExtendedMargins", "extended_margin", "extended_margin_batch"), "analytic.extended"),
+    **dict.fromkeys(
+        ("STATUSES", "AnalyticMarginResult", "AnalyticSettings", "BatchMargins", "analytic_margin",
+         "analytic_margin_batch"),
+        "analytic.margin",
+    ),
+    **dict.fromkeys(("SAMPLER_VERSION", "TableI", "sample_states"), "analytic.sampling"),
+    **dict.fromkeys(("FWPFeasibility", "fwp_feasibility"), "fwp.feasibility"),
+    "feasible_wrench_polytope": "fwp.polytope",
+    **dict.fromkeys(("CentroidalLoad", "ContactSet", "LegLimits"), "geometry.contact"),
+    **dict.fromkeys(("capture_point", "stability_margin"), "geometry.icp"),
+    **dict.fromkeys(("FeasibleRegion", "RegionSettings", "feasible_region", "solve_region"), "geometry.region"),
+}  # fmt: skip
+"""Public names loaded on first use (PEP 562), by the sub-module that defines them."""
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _ON_FIRST_USE:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{_ON_FIRST_USE[name]}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_ON_FIRST_USE})
+
 
 __all__ = [
     "LAMBDA_DIM",

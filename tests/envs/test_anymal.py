@@ -244,8 +244,19 @@ def test_rough_terrain_heights_match_mujoco_collision_geometry() -> None:
 
 
 def test_unknown_option_is_named() -> None:
-    with pytest.raises(TypeError, match="unknown environment options"):
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'margin_wieght'.*margin_weight"):
         gym.make("margin_rl/AnymalB-v1", margin_wieght=1.0)
+
+
+@pytest.mark.parametrize("make", [gym.make, lambda env_id, **kw: gym.make_vec(env_id, num_envs=2, **kw)])
+def test_an_unknown_keyword_is_refused_in_pythons_own_words(make) -> None:
+    """Worded as Python's TypeError for an unexpected keyword (clients probe optional keywords by that message
+    and retry without them), then the valid fields."""
+    pattern = r"^Anymal(Vector)?Env\.__init__\(\) got an unexpected keyword argument 'unknown'; .*margin_weight"
+    with pytest.raises(TypeError, match=pattern):
+        make("margin_rl/AnymalB-v1", unknown=1)
+    with pytest.raises(TypeError, match=r"got an unexpected keyword argument 'also' \(and \['unknown'\]\)"):
+        make("margin_rl/AnymalB-v1", unknown=1, also=2)
     with pytest.raises(ValueError, match="margin must be"):
         gym.make("margin_rl/AnymalB-v1", margin="magic")
 

@@ -156,7 +156,7 @@ def test_keyword_use_changes_only_the_named_keys() -> None:
 
 @pytest.mark.parametrize("legacy", sorted(LEGACY_FIELDS))
 def test_a_v0_keyword_is_refused_with_the_v1_spelling(legacy: str) -> None:
-    message = rf"unknown environment options \['{legacy}'\].*{legacy} is now reward_params=\{{'{legacy}': \.\.\.\}}"
+    message = rf"unexpected keyword argument '{legacy}'.*{legacy} is now reward_params=\{{'{legacy}': \.\.\.\}}"
     with pytest.raises(TypeError, match=message + r".*--env-option reward_params\." + legacy):
         gym.make("margin_rl/AnymalB-v1", margin="none", **{legacy: 0.1})
 

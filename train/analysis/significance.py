@@ -130,6 +130,8 @@ def bootstrap_interval(
     """
     rng = np.random.default_rng(seed)
     key_a, key_b = _content_key(values_a), _content_key(values_b)
+    if key_a == key_b:  # the same values in another order: resample one sorted copy, so the order cannot matter
+        values_a = values_b = np.sort(values_a)
     if key_b < key_a:
         means_b = _resampled_means(values_b, resamples, rng)
         means_a = _resampled_means(values_a, resamples, rng)

@@ -123,13 +123,21 @@ def rsl_vec_env(target: AnymalTarget, num_envs: int, seed: int | None, device: s
 
 
 def make_rsl_env(
-    env_id: str, num_envs: int, seed: int | None = None, device: str = "cpu", **env_options: Any
+    env_id: str,
+    num_envs: int,
+    seed: int | None = None,
+    device: str = "cpu",
+    physics: str = "mujoco",
+    physics_device: str | None = None,
+    **env_options: Any,
 ) -> RslVecEnv:
     """An rsl-rl ``VecEnv`` of ``num_envs`` environments of a margin_rl ANYmal id, over the batched simulation
     (reset on construction; observations and rewards as torch tensors on ``device``).
 
     ``env_options``: any :class:`~margin_rl.envs.config.EnvConfig` field (e.g. ``margin_weight=0.2``,
-    ``reward_params={"alive_bonus": 0.1}``); ``seed`` seeds the initial states. Example::
+    ``reward_params={"alive_bonus": 0.1}``); ``seed`` seeds the initial states; ``device`` is the learner's,
+    ``physics`` and ``physics_device`` the simulator's (``"mujoco"``, or ``"warp"`` with ``"cpu"``: MuJoCo Warp on
+    Warp's CPU device; see :mod:`margin_rl.envs.physics_warp`). Example::
 
         from rsl_rl.runners import OnPolicyRunner
         from margin_rl.train import make_rsl_env
@@ -145,7 +153,7 @@ def make_rsl_env(
         TypeError: an option that is not an EnvConfig field, or a badly typed value.
     """
     config = anymal_config(env_id, env_options, "make_rsl_env")
-    return RslVecEnv(make_core(config, num_envs, seed), device)
+    return RslVecEnv(make_core(config, num_envs, seed, physics, physics_device), device)
 
 
 class TrainingStopped(Exception):  # noqa: N818 - a control-flow signal, not an error

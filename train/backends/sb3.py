@@ -162,12 +162,20 @@ def sb3_vec_env(target: AnymalTarget, num_envs: int, seed: int | None) -> Sb3Vec
     return Sb3VecEnv(make_core(target.config, num_envs, seed))
 
 
-def make_sb3_env(env_id: str, num_envs: int, seed: int | None = None, **env_options: Any) -> Sb3VecEnv:
+def make_sb3_env(
+    env_id: str,
+    num_envs: int,
+    seed: int | None = None,
+    physics: str = "mujoco",
+    physics_device: str | None = None,
+    **env_options: Any,
+) -> Sb3VecEnv:
     """A Stable-Baselines3 ``VecEnv`` of ``num_envs`` environments of a margin_rl ANYmal id, over the native
     batched simulation (much faster than SB3's ``DummyVecEnv`` of single environments).
 
     ``env_options``: any :class:`~margin_rl.envs.config.EnvConfig` field (e.g. ``margin_weight=0.2``,
-    ``reward_params={"alive_bonus": 0.1}``, ``margin="analytic"``); ``seed`` seeds the initial states. Example::
+    ``reward_params={"alive_bonus": 0.1}``, ``margin="analytic"``); ``seed`` seeds the initial states; ``physics``
+    and ``physics_device``: the simulator (see :func:`~margin_rl.train.backends.rsl.make_rsl_env`). Example::
 
         from stable_baselines3 import PPO
         from margin_rl.train import make_sb3_env
@@ -183,7 +191,7 @@ def make_sb3_env(env_id: str, num_envs: int, seed: int | None = None, **env_opti
         TypeError: an option that is not an EnvConfig field, or a badly typed value.
     """
     config = anymal_config(env_id, env_options, "make_sb3_env")
-    return Sb3VecEnv(make_core(config, num_envs, seed))
+    return Sb3VecEnv(make_core(config, num_envs, seed, physics, physics_device))
 
 
 def warn_unpickling(path: str | Path) -> None:

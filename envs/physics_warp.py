@@ -1,0 +1,276 @@
+"""MuJoCo Warp behind the physics seam: ``num_envs`` worlds of one model stepped by ``mujoco_warp`` kernels.
+
+:class:`WarpPhysics` satisfies :class:`~margin_rl.envs.physics.PhysicsBackend`, the contract
+:class:`~margin_rl.envs.physics.MujocoBatchPhysics` satisfies, with these differences (each a property of Warp,
+stated where the core or a user meets it):
+
+* **float32.** Warp computes in single precision; the live arrays are float32 (``mujoco.batch``: float64). One
+  decimated step from the same state agrees with MuJoCo to ~1e-5 on flat ground; on the rough heightfield the
+  contact sets can differ, and so can the trajectories (the tests state each tolerance and its reason).
+* **Where the arrays live.** The live arrays are numpy views of the Warp arrays, shared with the kernels, which
+  exist on Warp's CPU device only: on a GPU they would be copies, and every write of the core would be lost. The
+  core of this package is written in numpy, so it runs this backend on Warp's CPU device (tests, debugging,
+  parity); ``physics_device="cuda:0"`` raises until the core runs on the physics' device.
+* **Buffers of a stated size.** Warp allocates its contact and constraint buffers once (MuJoCo grows its arena).
+  :func:`contact_budget` sizes them from the model; a step that needs more sets ``Data.overflow``, which this
+  backend collects on the device and :meth:`WarpPhysics.check_overflow` turns into :class:`PhysicsOverflowError`,
+  naming the setting to raise (``nconmax`` / ``njmax``).
+* **Divergence.** Warp neither raises nor resets a simulation whose accelerations blow up: its state turns
+  non-finite and stays so, which the core's divergence check (non-finite or too fast) catches; :meth:`step`
+  never reports failed ids of its own.
+* **Resets** go through ``mujoco_warp.reset_data_keyframe`` with a per-world keyframe index (-1: left alone), so
+  the solver's warm start, the applied forces and the clock of a reset world are cleared as MuJoCo clears them.
+
+Kernels compile on first use (tens of seconds for ANYmal on one CPU core, cached in ``~/.cache/warp`` after).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import mujoco
+import numpy as np
+
+try:
+    import mujoco_warp as mjw
+    import warp as wp
+except ImportError as exc:  # the optional dependency of the GPU path
+    raise ImportError(
+        f"physics='warp' needs MuJoCo Warp ({exc}); install it with: pip install \"margin_rl[gpu]\" (mujoco-warp "
+        "and warp-lang, pinned together with mujoco), or use physics='mujoco'"
+    ) from exc
+
+from margin_rl.envs.physics import SET_CONST_INPUTS, ModelConstants, render_data
+
+# No start-up banner and no line per kernel module loaded or compiled (hundreds for ANYmal); warnings stay.
+wp.config.log_level = wp.LOG_WARNING
+
+INTEGRATION_STATE = int(mujoco.mjtState.mjSTATE_INTEGRATION)
+"""The state components :meth:`WarpPhysics.get_state` carries: MuJoCo's integration state (time, qpos, qvel, act,
+the solver's warm start, controls, applied forces, ...), as ``mujoco.batch`` does."""
+
+BUFFER_OVERFLOWS = int(
+    mjw.OverflowType.NEFC
+    | mjw.OverflowType.NJMAX_NNZ
+    | mjw.OverflowType.BROADPHASE
+    | mjw.OverflowType.NARROWPHASE
+    | mjw.OverflowType.CCD
+    | mjw.OverflowType.HFIELD
+    | mjw.OverflowType.NVMAX
+    | mjw.OverflowType.EPA_HORIZON
+)
+"""The bits of ``Data.overflow`` that mean a buffer was too small and something was dropped (the solver's
+iteration limits are not among them: MuJoCo stops there too, and nothing is lost)."""
+
+CONTACTS_PER_GEOM = {"plane": 1, "hfield": 4}
+"""Contacts one robot geom makes with the ground at most, by the ground's kind: one on a plane (sphere, capsule
+and box against a plane give 1-4, the robot's collision geoms here are spheres and capsules: measured at most 1
+per geom); on a heightfield MuJoCo's convex collision gives a sphere up to 3 contacts where it straddles prism
+edges (measured, issue of the rough terrain's speed), so 4 leaves a margin."""
+
+ROWS_PER_CONTACT = 4
+"""Constraint rows of one contact with a pyramidal friction cone and condim 3 (2 (condim - 1))."""
+
+
+class PhysicsOverflowError(RuntimeError):
+    """A Warp contact or constraint buffer was too small: contacts or constraint rows were dropped."""
+
+
+def contact_budget(model: mujoco.MjModel) -> tuple[int, int]:
+    """(nconmax, njmax): contacts and constraint rows per world, by a rule stated here and in the tests.
+
+    nconmax = n_g c, with n_g the geoms that can collide with the ground (contype/conaffinity) and c
+    :data:`CONTACTS_PER_GEOM` of the ground's kind; njmax = :data:`ROWS_PER_CONTACT` nconmax plus one row per
+    limited joint (each limit can be active) and per equality (none in ANYmal). Rounded up to a multiple of 8.
+    """
+    floor = int(model.geom("floor").id) if _has_geom(model, "floor") else -1
+    ground_kind = "hfield" if floor >= 0 and model.geom_type[floor] == mujoco.mjtGeom.mjGEOM_HFIELD else "plane"
+    if floor >= 0:
+        touches = (model.geom_contype & model.geom_conaffinity[floor]) | (
+            model.geom_conaffinity & model.geom_contype[floor]
+        )
+        colliding = int(np.count_nonzero(touches)) - 1  # the floor itself
+    else:
+        colliding = int(model.ngeom)
+    nconmax = max(8, colliding * CONTACTS_PER_GEOM[ground_kind])
+    njmax = ROWS_PER_CONTACT * nconmax + int(np.count_nonzero(model.jnt_limited)) + int(model.neq)
+    return _round_up(nconmax, 8), _round_up(njmax, 8)
+
+
+def _has_geom(model: mujoco.MjModel, name: str) -> bool:
+    return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name) >= 0
+
+
+def _round_up(value: int, multiple: int) -> int:
+    return int(math.ceil(value / multiple) * multiple)
+
+
+def check_warp_device(device: str | None) -> str:
+    """The Warp device this backend runs on: ``device`` checked, or the first GPU; ValueError otherwise.
+
+    The numpy core shares the Warp arrays with numpy, which only Warp's CPU device allows (module docstring).
+    """
+    available = [str(d) for d in wp.get_devices()]
+    if device is None:
+        gpus = [d for d in available if d.startswith("cuda")]
+        if not gpus:
+            raise ValueError(
+                "physics='warp' defaults to the first GPU, and Warp finds none here (devices: "
+                f"{', '.join(available)}); pass physics_device='cpu' for Warp's CPU device (tests and debugging), "
+                "or physics='mujoco' to train on the CPU"
+            )
+        device = gpus[0]
+    if not isinstance(device, str) or device not in available:
+        raise ValueError(f"physics_device must be one of Warp's devices {available}, got {device!r}")
+    if device != "cpu":
+        raise ValueError(
+            f"physics_device={device!r}: the environment core computes in numpy on the host, which shares Warp's "
+            "arrays only on its CPU device; on a GPU every write would go to a copy. Use physics_device='cpu' "
+            "(Warp on the CPU, for tests and parity) or physics='mujoco' (mujoco.batch, the fast CPU path)"
+        )
+    return device
+
+
+class WarpPhysics(ModelConstants):
+    """``num_envs`` worlds of ``model`` in MuJoCo Warp (see the module docstring)."""
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        num_envs: int,
+        device: str | None = None,
+        nconmax: int | None = None,
+        njmax: int | None = None,
+    ) -> None:
+        """``device``: a Warp device name (see :func:`check_warp_device`); ``nconmax``, ``njmax``: contacts and
+        constraint rows per world (None: :func:`contact_budget`)."""
+        self.model = model
+        self.num_envs = num_envs
+        self.device = check_warp_device(device)
+        default_nconmax, default_njmax = contact_budget(model)
+        self.nconmax = default_nconmax if nconmax is None else int(nconmax)
+        self.njmax = default_njmax if njmax is None else int(njmax)
+        with wp.ScopedDevice(self.device):
+            batched = (*PER_ENV_FIELDS, *DERIVED_PER_WORLD)
+            self._model = mjw.put_model(model, batch_sizes={name: num_envs for name in batched})
+            self._model.opt.warn_overflow = 0  # reported by check_overflow, not printed from inside a kernel
+            # At qpos0 the robot may sit inside the terrain (the core resets every world before its first step).
+            self._data = mjw.make_data(
+                model, nworld=num_envs, nconmax=self.nconmax, njmax=self.njmax, naconmax=self.nconmax * num_envs
+            )
+            self._keyframe_of_world = wp.full(num_envs, -1, dtype=int)
+            self._state_rows = wp.zeros((num_envs, mujoco.mj_stateSize(model, INTEGRATION_STATE)), dtype=float)
+        data = self._data
+        self.qpos, self.qvel, self.time = data.qpos.numpy(), data.qvel.numpy(), data.time.numpy()
+        self.ctrl, self.xfrc_applied = data.ctrl.numpy(), data.xfrc_applied.numpy()
+        self.sensordata, self.site_xpos, self.xpos = data.sensordata.numpy(), data.site_xpos.numpy(), data.xpos.numpy()
+        self.actuator_force = data.actuator_force.numpy()
+        self._overflow = data.overflow.numpy()
+        self._overflow_seen = np.zeros(num_envs, dtype=np.int64)  # kept across resets (which clear Data.overflow)
+        self._per_env_fields = {name: getattr(self._model, name).numpy() for name in PER_ENV_FIELDS}
+
+    # ------------------------------------------------------------------ per-environment model fields
+    def per_env_field(self, name: str) -> np.ndarray:
+        """The live ``(num_envs, ...)`` per-world values of model field ``name`` (one of :data:`PER_ENV_FIELDS`);
+        after writing a field of :data:`~margin_rl.envs.physics.SET_CONST_INPUTS`, call :meth:`set_const`."""
+        if name not in self._per_env_fields:
+            raise ValueError(
+                f"{name!r} is not a per-environment field of the Warp backend; it has {sorted(PER_ENV_FIELDS)} "
+                "(put_model's batch_sizes, fixed when the backend is built)"
+            )
+        return self._per_env_fields[name]
+
+    def set_const(self) -> None:
+        """Recompute the constants derived from the per-world model fields (``mujoco_warp.set_const``)."""
+        with wp.ScopedDevice(self.device):
+            mjw.set_const(self._model, self._data)
+
+    # ------------------------------------------------------------------ operations
+    def reset(self, ids: np.ndarray, keyframe: int) -> None:
+        """Reset worlds ``ids`` to ``keyframe`` (state, controls, applied forces, warm start, clock), computing
+        nothing (the caller writes the state, then calls :meth:`forward`)."""
+        self._collect_overflow()
+        keys = np.full(self.num_envs, -1, dtype=np.int32)
+        keys[np.asarray(ids, dtype=np.int64)] = keyframe
+        self._keyframe_of_world.numpy()[:] = keys
+        with wp.ScopedDevice(self.device):
+            mjw.reset_data_keyframe(self._model, self._data, self._keyframe_of_world)
+
+    def forward(self, ids: np.ndarray | None = None) -> None:
+        """Compute every derived quantity of the worlds. Warp's forward pass has no world mask: it runs on all
+        of them, which leaves the others' outputs as they were (a forward pass is a function of the state)."""
+        with wp.ScopedDevice(self.device):
+            mjw.forward(self._model, self._data)
+
+    def step(self, nstep: int) -> np.ndarray:
+        """Advance every world by ``nstep`` physics steps, then compute the derived quantities of the new state
+        (as ``mujoco.batch`` with ``stage=mjSTAGE_ACC``). Returns no ids: Warp reports no failed simulation (see the
+        module docstring)."""
+        with wp.ScopedDevice(self.device):
+            for _ in range(nstep):
+                mjw.step(self._model, self._data)
+            mjw.forward(self._model, self._data)
+        return np.zeros(0, dtype=np.int64)
+
+    def check_overflow(self) -> None:
+        """:class:`PhysicsOverflowError` if any world's contact or constraint buffer overflowed since the backend
+        was built (dropped contacts make every later step of that world wrong), naming the setting to raise."""
+        self._collect_overflow()
+        worlds = np.flatnonzero(self._overflow_seen & BUFFER_OVERFLOWS)
+        if worlds.size == 0:
+            return
+        kinds = mjw.OverflowType(int(np.bitwise_or.reduce(self._overflow_seen[worlds])) & BUFFER_OVERFLOWS)
+        raise PhysicsOverflowError(
+            f"MuJoCo Warp dropped contacts or constraint rows ({kinds!r}) in {worlds.size} of {self.num_envs} worlds "
+            f"(first: {worlds[:5].tolist()}); the buffers hold nconmax={self.nconmax} contacts and njmax={self.njmax} "
+            "constraint rows per world: raise them (physics_options={'nconmax': ..., 'njmax': ...}), e.g. double both"
+        )
+
+    def _collect_overflow(self) -> None:
+        self._overflow_seen |= self._overflow
+
+    def render_data(self, env: int) -> mujoco.MjData:
+        """An MjData with world ``env``'s positions and velocities, forwarded by MuJoCo (for rendering)."""
+        return render_data(self.model, self.qpos[env], self.qvel[env])
+
+    # ------------------------------------------------------------------ state
+    def get_state(self) -> dict[str, Any]:
+        """A copy of the integration state rows (:data:`INTEGRATION_STATE`, float32) and the per-world model
+        fields: what a restored backend needs to step on identically."""
+        with wp.ScopedDevice(self.device):
+            mjw.get_state(self._model, self._data, self._state_rows, INTEGRATION_STATE)
+        return {
+            "state": self._state_rows.numpy().copy(),
+            "per_env_fields": {name: values.copy() for name, values in self._per_env_fields.items()},
+        }
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        """Restore a :meth:`get_state` of a backend of the same model and size, and recompute the derived
+        quantities."""
+        rows = np.asarray(state["state"])
+        if rows.shape != tuple(self._state_rows.shape):
+            raise ValueError(
+                f"physics state of shape {rows.shape} does not fit these worlds {tuple(self._state_rows.shape)}: "
+                "restore it into a backend of the same model and number of environments"
+            )
+        changed = {n for n, v in state["per_env_fields"].items() if not np.array_equal(self.per_env_field(n), v)}
+        for name in changed:
+            self.per_env_field(name)[:] = state["per_env_fields"][name]
+        # Only where the masses changed: Warp's set_const recomputes the derived constants in float32, which differ
+        # in the last bits from put_model's (MuJoCo's float64), and the restored worlds would not step identically.
+        if SET_CONST_INPUTS & changed:
+            self.set_const()
+        self._state_rows.numpy()[:] = rows
+        with wp.ScopedDevice(self.device):
+            mjw.set_state(self._model, self._data, self._state_rows, INTEGRATION_STATE)
+        self.forward()
+
+
+PER_ENV_FIELDS: tuple[str, ...] = ("geom_friction", "body_mass")
+"""Model fields with a value per world (``put_model``'s ``batch_sizes``): the terrain friction and the base mass
+the core randomises."""
+
+DERIVED_PER_WORLD: tuple[str, ...] = ("body_subtreemass", "body_invweight0", "dof_invweight0", "actuator_acc0")
+"""Model fields ``mujoco_warp.set_const`` derives from the body masses: batched too, or every world would share one
+world's subtree mass (the CoM sensors read it: measured 1.6-7.6 cm CoM error with ±5 kg of base mass unbatched)."""

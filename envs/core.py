@@ -122,7 +122,7 @@ class AnymalCore:
         """``autoreset``: reset finished environments inside :meth:`step` (vector semantics); ``truncate``:
         end episodes at ``episode_length_s`` (off when a TimeLimit wrapper does it); ``physics``,
         ``physics_device``, ``physics_options``: the simulator behind the seam, where it computes and its own
-        settings (:func:`~margin_rl.envs.physics.make_physics`); not EnvConfig fields, so that a run made with one
+        settings (:func:`~margin_rl.envs.backends.make_physics`); not EnvConfig fields, so that a run made with one
         backend evaluates and resumes with another."""
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
@@ -204,7 +204,10 @@ class AnymalCore:
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         state = dict(state)
-        self._build(*state.pop("_setup"))
+        setup = state.pop("_setup")
+        if len(setup) == 5:  # pickled before the physics backends: mujoco.batch, the only one then
+            setup = (*setup, PhysicsChoice(PHYSICS_BACKENDS[0], None, {}))
+        self._build(*setup)
         self.physics.set_state(state.pop("_physics"))
         for name, value in state.items():
             setattr(self, name, value)

@@ -10,3 +10,16 @@ import os
 # anything imports mujoco, when Mesa's EGL is installed (rendering tests skip or report otherwise).
 if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and ctypes.util.find_library("EGL"):
     os.environ["MUJOCO_GL"] = "egl"
+
+
+def require_mujoco_warp() -> None:
+    """Skip the calling test (or module) without MuJoCo Warp, except under CI (``CI=true``), where ``make test``
+    installs the ``gpu`` extra and a missing package is a failure, never a skip."""
+    import pytest
+
+    try:
+        import mujoco_warp  # noqa: F401
+    except ImportError:
+        if os.environ.get("CI") == "true":
+            raise
+        pytest.skip("mujoco-warp is not installed (pip install 'margin_rl[gpu]')", allow_module_level=True)

@@ -127,7 +127,7 @@ def make_core(
     config: EnvConfig, num_envs: int, seed: int | None, physics: str = "mujoco", physics_device: str | None = None
 ) -> AnymalCore:
     """The batched simulation of ``num_envs`` environments (reset by the adapters) on backend ``physics`` at
-    ``physics_device`` (:func:`margin_rl.envs.physics.make_physics`)."""
+    ``physics_device`` (:func:`margin_rl.envs.backends.make_physics`)."""
     return AnymalCore(config, num_envs=num_envs, seed=seed, physics=physics, physics_device=physics_device)
 
 

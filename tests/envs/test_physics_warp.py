@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import copy
 import inspect
-import os
 import pickle
 
 import gymnasium as gym
@@ -23,15 +22,11 @@ from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore
 from margin_rl.envs.physics import MujocoBatchPhysics, PhysicsBackend
 from margin_rl.stability import lambda_names
+from tests.conftest import require_mujoco_warp
 
-try:
-    import mujoco_warp  # noqa: F401
-except ImportError:
-    if os.environ.get("CI") == "true":
-        raise  # CI installs the gpu extra: a missing MuJoCo Warp is a failure there, never a skip
-    pytest.skip("mujoco-warp is not installed (pip install 'margin_rl[gpu]')", allow_module_level=True)
+require_mujoco_warp()
 
-from margin_rl.envs.physics_warp import PhysicsOverflowError, WarpPhysics, contact_budget
+from margin_rl.envs.physics_warp import PhysicsOverflowError, WarpPhysics, contact_budget  # noqa: E402
 
 WARP_CPU = {"physics": "warp", "physics_device": "cpu"}
 N = 8

@@ -117,9 +117,17 @@ class RslVecEnv(VecEnv):
         return self._obs, rewards, dones, extras
 
 
-def rsl_vec_env(target: AnymalTarget, num_envs: int, seed: int | None, device: str = "cpu") -> RslVecEnv:
-    """The training ``VecEnv`` of an environment target: :class:`RslVecEnv` over the batched core."""
-    return RslVecEnv(make_core(target.config, num_envs, seed), device)
+def rsl_vec_env(
+    target: AnymalTarget,
+    num_envs: int,
+    seed: int | None,
+    device: str = "cpu",
+    physics: str = "mujoco",
+    physics_device: str | None = None,
+) -> RslVecEnv:
+    """The training ``VecEnv`` of an environment target: :class:`RslVecEnv` over the batched core (on backend
+    ``physics`` at ``physics_device``; ``device``: where its tensors go, the learner's)."""
+    return RslVecEnv(make_core(target.config, num_envs, seed, physics, physics_device), device)
 
 
 def make_rsl_env(

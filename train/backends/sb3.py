@@ -157,9 +157,12 @@ class Sb3VecEnv(VecEnv):
         return [False for _ in self._indices(indices)]
 
 
-def sb3_vec_env(target: AnymalTarget, num_envs: int, seed: int | None) -> Sb3VecEnv:
-    """The training ``VecEnv`` of an environment target: :class:`Sb3VecEnv` over the batched core."""
-    return Sb3VecEnv(make_core(target.config, num_envs, seed))
+def sb3_vec_env(
+    target: AnymalTarget, num_envs: int, seed: int | None, physics: str = "mujoco", physics_device: str | None = None
+) -> Sb3VecEnv:
+    """The training ``VecEnv`` of an environment target: :class:`Sb3VecEnv` over the batched core (on backend
+    ``physics`` at ``physics_device``)."""
+    return Sb3VecEnv(make_core(target.config, num_envs, seed, physics, physics_device))
 
 
 def make_sb3_env(

@@ -46,7 +46,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from margin_rl.envs.backends import PHYSICS_BACKENDS
 from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.core import check_margin_runs_on
 from margin_rl.envs.physics import usable_cores
 from margin_rl.provenance import sha256_file
 from margin_rl.train.backends.rsl import rsl_vec_env, train_rsl
@@ -365,6 +367,8 @@ def train(
     command: list[str] | None = None,
     threads: int | None = 1,
     update_threads: int | None = None,
+    physics: str = "mujoco",
+    physics_device: str | None = None,
 ) -> TrainResult:
     """Train (or, with ``resume``, continue from the latest checkpoint of ``run_dir``) one PPO run.
 
@@ -372,7 +376,9 @@ def train(
     steps)`` is called after every checkpoint. ``threads``: torch intra-op threads while training (see
     :func:`margin_rl.train.runs.torch_threads`; None keeps torch's setting); ``update_threads``: torch threads
     inside the PPO update of either backend (None: one per core this process may run on, :func:`usable_cores`).
-    Threads change the speed, not what PPO computes. Raises FileExistsError when
+    Threads change the speed, not what PPO computes. ``physics``, ``physics_device``: the simulator
+    (:func:`margin_rl.envs.backends.make_physics`), chosen per call like the threads: not part of the run's
+    config, so a run trained on one backend resumes and evaluates on another. Raises FileExistsError when
     ``run_dir`` already holds checkpoints and ``resume`` is False, ValueError when the environment cannot be built
     (:func:`check_environment`).
     """
@@ -404,7 +410,8 @@ def train(
     t0 = time.perf_counter()
     try:
         with graceful_stop(stop, verbose=True), torch_threads(threads):
-            steps, stopped, torchscript = _run_backend(spec, run_dir, checkpoint, hooks, update_threads)
+            simulator = (physics, physics_device)
+            steps, stopped, torchscript = _run_backend(spec, run_dir, checkpoint, hooks, update_threads, simulator)
     finally:
         bar.close()
     elapsed = time.perf_counter() - t0
@@ -426,7 +433,12 @@ def train(
 
 
 def _run_backend(
-    spec: TrainSpec, run_dir: Path, checkpoint: Path | None, hooks: RunHooks, update_threads: int | None = None
+    spec: TrainSpec,
+    run_dir: Path,
+    checkpoint: Path | None,
+    hooks: RunHooks,
+    update_threads: int | None = None,
+    simulator: tuple[str, str | None] = ("mujoco", None),
 ) -> tuple[int, bool, Any]:
     """Seed, build the backend's vector environment over the spec's environment, and hand over to the backend."""
     torch.manual_seed(spec.seed)
@@ -435,10 +447,10 @@ def _run_backend(
     threads = usable_cores() if update_threads is None else update_threads
     learner = {"init_from": spec.init_from, "update_threads": threads}
     if isinstance(spec.ppo, RslPPOConfig):
-        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed)
+        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed, "cpu", *simulator)
         cfg = spec.backend_config(run_dir.name)
         return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final, **learner)
-    venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed)
+    venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed, *simulator)
     total = spec.total_iterations * spec.steps_per_iteration
     every = spec.checkpoint_every
     return train_sb3(venv, spec.ppo, run_dir, spec.seed, spec.device, total, every, checkpoint, hooks, final, **learner)
@@ -506,6 +518,16 @@ def build_parser() -> argparse.ArgumentParser:
         "trainings on one machine give each its share of the cores (1 for two runs on two cores: the default's "
         "threads spin against the other run's and its updates took 7x longer)",
     )
+    parser.add_argument(
+        "--physics",
+        choices=PHYSICS_BACKENDS,
+        default=PHYSICS_BACKENDS[0],
+        help="simulator: mujoco (mujoco.batch, the default) or warp (MuJoCo Warp, the gpu extra; on Warp's CPU "
+        "device for now). Not part of the run's config: a run resumes and evaluates on either",
+    )
+    parser.add_argument(
+        "--physics-device", default=None, help="the simulator's device (warp: cpu; default: the first GPU)"
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="also print the backend's own logs")
     return parser
@@ -537,8 +559,8 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         if fixed:
             raise ValueError(
                 f"--resume continues {args.resume} with the settings in its config.json; {', '.join(fixed)} would "
-                "change the run: drop them, or start a new run with --run-dir (--total-steps, --checkpoint-every and "
-                "--device may change on resume)"
+                "change the run: drop them, or start a new run with --run-dir (--total-steps, --checkpoint-every, "
+                "--physics and --device may change on resume)"
             )
         spec = load_spec(args.resume)
         changes = {
@@ -595,6 +617,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         spec, run_dir, resume = spec_from_args(args)
         check_environment(spec)
+        check_margin_runs_on(spec.target.config.margin, args.physics)
         if resume:
             check_same_margin(spec, run_dir)
     except (ValueError, TypeError, FileNotFoundError) as exc:
@@ -612,6 +635,8 @@ def main(argv: list[str] | None = None) -> int:
             command=command,
             threads=args.torch_threads,
             update_threads=args.update_threads,
+            physics=args.physics,
+            physics_device=args.physics_device,
         )
     except FileExistsError as exc:
         parser.error(str(exc))

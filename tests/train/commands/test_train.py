@@ -13,6 +13,7 @@ from tensorboard.backend.event_processing.event_file_loader import EventFileLoad
 
 from margin_rl.train.commands import train as train_module
 from margin_rl.train.runs import latest_checkpoint
+from tests.conftest import require_mujoco_warp
 from tests.train.conftest import tiny_args
 
 
@@ -200,3 +201,20 @@ def test_resume_refuses_options_that_define_the_run(tmp_path: Path) -> None:
     spec, resumed_dir, resume = train_module.spec_from_args(parser.parse_args(argv))
     assert resume and resumed_dir == run_dir
     assert (spec.seed, spec.num_envs, spec.total_steps, spec.checkpoint_every) == (3, 8, 4096, 1024)
+
+
+def test_a_run_trained_on_warp_resumes_on_mujoco(tmp_path: Path, toy_weights: str) -> None:
+    """--physics is chosen per call, like the threads: a run trained on the Warp backend (Warp's CPU device) records
+    no backend in its config.json and resumes on mujoco.batch; the LP margin kinds are refused beside Warp."""
+    require_mujoco_warp()
+    run_dir = tmp_path / "run"
+    warp = ["--physics", "warp", "--physics-device", "cpu"]
+    assert train_module.main([*tiny_args("rsl", run_dir, toy_weights, total=192, every=192), *warp]) == 0
+    config = json.loads((run_dir / "config.json").read_text())
+    recorded = {key: value for key, value in config.items() if key not in ("command", "sessions")}
+    assert "physics" not in json.dumps(recorded) and "--physics" in config["command"]  # the command line only
+    assert train_module.main(["--resume", str(run_dir), "--total-steps", "384", "--no-progress"]) == 0
+    assert json.loads((run_dir / "progress.json").read_text())["env_steps"] == 384
+    with pytest.raises(SystemExit):
+        train_module.main(["--margin", "analytic", "--run-dir", str(tmp_path / "lp"), "--no-progress", *warp])
+    assert not (tmp_path / "lp").exists()

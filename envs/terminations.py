@@ -17,16 +17,20 @@ read off zeros would mean nothing.
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
-import numpy as np
+from array_api_compat import array_namespace
 
 from margin_rl.envs.config import TerminationConfig
 
-Arrays = dict[str, np.ndarray]
+Arrays = dict[str, Any]
 """Per-environment inputs: ``base_contact`` (N,), ``thigh_contacts`` (N, 4), ``base_height`` (N,) above the
-terrain [m], ``tilt_cos`` (N,) the cosine of the base tilt, ``diverged`` (N,), all bool or float64."""
+terrain [m], ``tilt_cos`` (N,) the cosine of the base tilt, ``diverged`` (N,), all bool or float64; all numpy
+arrays or all torch tensors (each condition is written once, in the array API standard's names)."""
 
 
 @dataclass(frozen=True)
@@ -35,7 +39,7 @@ class TerminationCause:
 
     name: str
     description: str
-    condition: Callable[[Arrays, TerminationConfig], np.ndarray]
+    condition: Callable[[Arrays, TerminationConfig], Any]
 
     @property
     def info_key(self) -> str:
@@ -48,13 +52,17 @@ def info_key(cause: str) -> str:
     return f"termination_{cause}"
 
 
+def _any_leg(s: Arrays, bounds: TerminationConfig) -> Any:
+    return array_namespace(s["thigh_contacts"]).any(s["thigh_contacts"], axis=1)
+
+
 TERMINATION_CAUSES: tuple[TerminationCause, ...] = (
     TerminationCause("base_contact", "the base touches the terrain", lambda s, b: s["base_contact"]),
-    TerminationCause("thigh_contact", "a thigh touches the terrain", lambda s, b: s["thigh_contacts"].any(axis=1)),
+    TerminationCause("thigh_contact", "a thigh touches the terrain", _any_leg),
     TerminationCause(
         "base_height", "base below min_base_height above the terrain", lambda s, b: s["base_height"] < b.min_base_height
     ),
-    TerminationCause("tilt", "base tilted beyond max_tilt_rad", lambda s, b: s["tilt_cos"] < np.cos(b.max_tilt_rad)),
+    TerminationCause("tilt", "base tilted beyond max_tilt_rad", lambda s, b: s["tilt_cos"] < math.cos(b.max_tilt_rad)),
     TerminationCause("diverged", "the simulation diverged", lambda s, b: s["diverged"]),
 )
 """The causes, in the order they are reported."""
@@ -63,17 +71,18 @@ CAUSE_NAMES: tuple[str, ...] = tuple(c.name for c in TERMINATION_CAUSES)
 INFO_KEYS: tuple[str, ...] = tuple(c.info_key for c in TERMINATION_CAUSES)
 
 
-def termination_causes(inputs: Arrays, bounds: TerminationConfig) -> dict[str, np.ndarray]:
+def termination_causes(inputs: Arrays, bounds: TerminationConfig) -> dict[str, Any]:
     """Each cause's (N,) bool flags; a diverged environment has only ``diverged`` set (module docstring)."""
-    diverged = np.asarray(inputs["diverged"], dtype=bool)
-    finite_state = ~diverged
+    xp = array_namespace(inputs["diverged"])
+    finite_state = ~xp.astype(inputs["diverged"], xp.bool)
     causes = {}
     for cause in TERMINATION_CAUSES:
-        holds = np.asarray(cause.condition(inputs, bounds), dtype=bool)
+        holds = xp.astype(cause.condition(inputs, bounds), xp.bool)
         causes[cause.name] = holds if cause.name == "diverged" else holds & finite_state
     return causes
 
 
-def any_cause(causes: dict[str, np.ndarray]) -> np.ndarray:
+def any_cause(causes: dict[str, Any]) -> Any:
     """``terminated``: (N,) True where any cause holds."""
-    return np.logical_or.reduce([causes[name] for name in CAUSE_NAMES])
+    flags = [causes[name] for name in CAUSE_NAMES]
+    return functools.reduce(array_namespace(*flags).logical_or, flags)

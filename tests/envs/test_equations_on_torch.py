@@ -1,0 +1,96 @@
+"""The environments' equations written once over numpy and torch (the array API standard's names): every reward term
+and every termination cause gives the same numbers on torch tensors as on numpy arrays, and numpy's own numbers
+(hand-checked values for the kernel and the clipped terms), for random inputs and for bad ones (NaN, inf)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from margin_rl.envs.config import TerminationConfig
+from margin_rl.envs.rewards import REWARD_TERMS, compute_rewards, logistic_kernel
+from margin_rl.envs.terminations import CAUSE_NAMES, any_cause, termination_causes
+
+N = 16
+
+
+def reward_inputs(rng: np.random.Generator, n: int = N) -> dict[str, np.ndarray]:
+    """Every array a reward term reads, of the core's shapes and dtypes."""
+    return {
+        "command": rng.uniform(-1, 1, (n, 3)),
+        "base_lin_vel": rng.normal(size=(n, 3)),
+        "base_ang_vel": rng.normal(size=(n, 3)),
+        "projected_gravity": rng.normal(size=(n, 3)),
+        "margin": rng.normal(0, 0.1, n),
+        "torques": rng.normal(0, 30, (n, 12)),
+        "action": rng.uniform(-1, 1, (n, 12)),
+        "last_action": rng.uniform(-1, 1, (n, 12)),
+        "joint_acc": rng.normal(0, 50, (n, 12)),
+        "touchdown": rng.random((n, 4)) < 0.3,
+        "air_time_at_touchdown": rng.uniform(0, 1, (n, 4)),
+        "thigh_contacts": rng.random((n, 4)) < 0.2,
+        "knee_heights": rng.uniform(0, 0.3, (n, 4)),
+        "knee_clearance_height": np.full(n, 0.1),
+        "base_height": rng.uniform(0.2, 0.6, n),
+        "base_height_target": np.full(n, 0.45),
+    }
+
+
+def on_torch(arrays: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+    return {name: torch.from_numpy(np.ascontiguousarray(a)) for name, a in arrays.items()}
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), gain=st.floats(0.5, 20.0))
+def test_every_reward_term_is_the_same_on_torch(seed: int, gain: float) -> None:
+    inputs = reward_inputs(np.random.default_rng(seed))
+    weights = {name: 1.0 for name in REWARD_TERMS}
+    total, terms = compute_rewards(weights, inputs, gain)
+    total_t, terms_t = compute_rewards(weights, on_torch(inputs), gain)
+    assert isinstance(total, np.ndarray) and isinstance(total_t, torch.Tensor) and total_t.dtype == torch.float64
+    for name in REWARD_TERMS:
+        np.testing.assert_allclose(terms_t[name].numpy(), terms[name], rtol=1e-12, atol=1e-12, err_msg=name)
+    np.testing.assert_allclose(total_t.numpy(), total, rtol=1e-12, atol=1e-12)
+
+
+def test_the_terms_hold_their_hand_computed_values() -> None:
+    """The kernel's peak and tails, and the clipped terms at and beyond their thresholds, on both kinds of arrays."""
+    for xp_array in (np.asarray, lambda values: torch.as_tensor(np.asarray(values, dtype=np.float64))):
+        x = xp_array(np.array([0.0, 1.0, -1.0, 100.0, -np.inf]))
+        expected = [0.25, 1 / (np.exp(-1) + 2 + np.exp(1)), 1 / (np.exp(-1) + 2 + np.exp(1)), 0.0, 0.0]
+        np.testing.assert_allclose(np.asarray(logistic_kernel(x)), expected, atol=1e-21)
+        knees = {"knee_heights": xp_array(np.array([[0.05, 0.1, 0.2, 0.0]])), "knee_clearance_height": xp_array([0.1])}
+        assert float(REWARD_TERMS["knee_clearance"](knees, 1.0)[0]) == pytest.approx(0.05 + 0.1)
+        base = {"base_height": xp_array([0.40, 0.50]), "base_height_target": xp_array([0.45, 0.45])}
+        np.testing.assert_allclose(np.asarray(REWARD_TERMS["base_height"](base, 1.0)), [0.05, 0.0], atol=1e-15)
+
+
+def test_no_reward_term_on_an_empty_weighting_gives_zeros_of_the_inputs_kind() -> None:
+    inputs = reward_inputs(np.random.default_rng(0))
+    total, terms = compute_rewards({}, on_torch(inputs), 8.0)
+    assert terms == {} and isinstance(total, torch.Tensor) and total.dtype == torch.float64 and not total.any()
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_every_termination_cause_is_the_same_on_torch(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    inputs = {
+        "base_contact": rng.random(N) < 0.2,
+        "thigh_contacts": rng.random((N, 4)) < 0.1,
+        "base_height": rng.uniform(0.1, 0.6, N),
+        "tilt_cos": rng.uniform(-1, 1, N),
+        "diverged": rng.random(N) < 0.2,
+    }
+    inputs["base_height"][0] = np.nan  # a diverged world's bookkeeping can hold anything: only `diverged` counts
+    inputs["diverged"][0] = True
+    bounds = TerminationConfig()
+    causes, causes_t = termination_causes(inputs, bounds), termination_causes(on_torch(inputs), bounds)
+    for name in CAUSE_NAMES:
+        assert causes_t[name].dtype == torch.bool
+        np.testing.assert_array_equal(causes_t[name].numpy(), causes[name], err_msg=name)
+    np.testing.assert_array_equal(any_cause(causes_t).numpy(), any_cause(causes))
+    assert [causes[name][0] for name in CAUSE_NAMES] == [name == "diverged" for name in CAUSE_NAMES]

@@ -5,7 +5,7 @@ negative weights in :data:`margin_rl.envs.config.REWARD_PRESETS`. The reward is 
 policy step, and every weighted term is reported in ``info`` as ``reward_<name>``.
 
 Each term is written once, in the array API standard's names, for numpy arrays (``mujoco.batch``) and torch tensors
-(a device-resident step) alike: the namespace comes from the arrays (``array_api_compat.array_namespace``); on
+(a device-resident step) alike: the namespace comes from the arrays (:func:`margin_rl.arrays.namespace`); on
 numpy it calls numpy's own functions, so the numbers are numpy's.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from array_api_compat import array_namespace
+from margin_rl.arrays import namespace
 
 Arrays = dict[str, Any]
 """Per-environment arrays by name, all numpy or all torch (float64, bool for flags)."""
@@ -22,7 +22,7 @@ Arrays = dict[str, Any]
 
 def logistic_kernel(x: Any) -> Any:
     """L(x) = (e^-x + 2 + e^x)^-1, in (0, 1/4], peak at x = 0 (seed 000 §V-C)."""
-    xp = array_namespace(x)
+    xp = namespace(x)
     x = xp.clip(x, -50.0, 50.0)
     return 1.0 / (xp.exp(-x) + 2.0 + xp.exp(x))
 
@@ -41,7 +41,7 @@ def alive(s: Arrays, gain: float) -> Any:
     """1 per policy step. A constant survival reward: with a margin term that is negative on most steps of a
     dynamic gait, L + w m < 0 per step makes falling at once the best PPO can do; the bonus removes that
     incentive and changes nothing else (see EnvConfig.alive_bonus)."""
-    xp = array_namespace(s["margin"])
+    xp = namespace(s["margin"])
     return xp.ones_like(s["margin"], dtype=xp.float64)
 
 
@@ -59,7 +59,7 @@ def vertical_velocity(s: Arrays, gain: float) -> Any:
 
 def _row_sum(x: Any) -> Any:
     """Sum over the second axis (N, k) -> (N,)."""
-    return array_namespace(x).sum(x, axis=1)
+    return namespace(x).sum(x, axis=1)
 
 
 def roll_pitch_rate(s: Arrays, gain: float) -> Any:
@@ -84,14 +84,14 @@ def joint_acceleration(s: Arrays, gain: float) -> Any:
 
 def feet_air_time(s: Arrays, gain: float) -> Any:
     """Sum over feet touching down this step of (air time - 0.5 s); zero for a near-zero command."""
-    xp = array_namespace(s["command"])
+    xp = namespace(s["command"])
     moving = xp.linalg.vector_norm(s["command"][:, :2], axis=1) > 0.1
     return _row_sum((s["air_time_at_touchdown"] - 0.5) * s["touchdown"]) * moving
 
 
 def collisions(s: Arrays, gain: float) -> Any:
     """Number of thigh contacts with the terrain."""
-    xp = array_namespace(s["thigh_contacts"])
+    xp = namespace(s["thigh_contacts"])
     return _row_sum(xp.astype(s["thigh_contacts"], xp.float64))
 
 
@@ -99,7 +99,7 @@ def knee_clearance(s: Arrays, gain: float) -> Any:
     """Sum over the legs of how far each knee (KFE joint) is below the clearance height above the terrain [m]:
     sum_i max(0, h_c - h_knee,i), zero while every knee is at least h_c high (EnvConfig.knee_clearance)."""
     deficit = s["knee_clearance_height"][:, None] - s["knee_heights"]
-    return _row_sum(array_namespace(deficit).clip(deficit, min=0.0))
+    return _row_sum(namespace(deficit).clip(deficit, min=0.0))
 
 
 def base_height(s: Arrays, gain: float) -> Any:
@@ -107,7 +107,7 @@ def base_height(s: Arrays, gain: float) -> Any:
     max(0, h_target - h_base), zero at or above the target (target: RewardParams.base_height_fraction times
     the MJCF standing keyframe's base height)."""
     below = s["base_height_target"] - s["base_height"]
-    return array_namespace(below).clip(below, min=0.0)
+    return namespace(below).clip(below, min=0.0)
 
 
 REWARD_TERMS: dict[str, Callable[[Arrays, float], Any]] = {
@@ -138,6 +138,6 @@ def compute_rewards(weights: dict[str, float], s: Arrays, gain: float) -> tuple[
     if unknown:
         raise ValueError(f"unknown reward terms {sorted(unknown)}; known: {sorted(REWARD_TERMS)}")
     terms = {name: w * REWARD_TERMS[name](s, gain) for name, w in weights.items()}
-    xp = array_namespace(s["margin"])
+    xp = namespace(s["margin"])
     total = xp.sum(xp.stack(list(terms.values())), axis=0) if terms else xp.zeros_like(s["margin"], dtype=xp.float64)
     return total, terms

@@ -14,41 +14,47 @@ step-to-step noise, so impact spikes do not drive the reward, at a lag of about 
 
 from __future__ import annotations
 
-import numpy as np
+from typing import Any
 
+from margin_rl.arrays import namespace
 from margin_rl.stability.analytic.lambda_state import StabilityState
 
 
-def heading_rotation(base_rotation: np.ndarray) -> np.ndarray:
-    """Rotation R_WH (..., 3, 3) of the horizontal frame H in the world: the yaw of the base x axis."""
-    yaw = np.arctan2(base_rotation[..., 1, 0], base_rotation[..., 0, 0])
-    c, s = np.cos(yaw), np.sin(yaw)
-    zero, one = np.zeros_like(c), np.ones_like(c)
-    return np.stack([np.stack([c, -s, zero], -1), np.stack([s, c, zero], -1), np.stack([zero, zero, one], -1)], -2)
+def heading_rotation(base_rotation: Any) -> Any:
+    """Rotation R_WH (..., 3, 3) of the horizontal frame H in the world: the yaw of the base x axis (numpy arrays or
+    torch tensors, :mod:`margin_rl.arrays`)."""
+    xp = namespace(base_rotation)
+    yaw = xp.atan2(base_rotation[..., 1, 0], base_rotation[..., 0, 0])
+    c, s = xp.cos(yaw), xp.sin(yaw)
+    zero, one = xp.zeros_like(c), xp.ones_like(c)
+    rows = [xp.stack([c, -s, zero], axis=-1), xp.stack([s, c, zero], axis=-1), xp.stack([zero, zero, one], axis=-1)]
+    return xp.stack(rows, axis=-2)
 
 
 def stability_state_from_simulation(
-    base_rotation: np.ndarray,
-    com: np.ndarray,
-    com_vel: np.ndarray,
-    com_acc: np.ndarray,
-    base_ang_acc: np.ndarray,
-    ext_force: np.ndarray,
-    ext_torque: np.ndarray,
-    feet: np.ndarray,
-    mu: np.ndarray,
-    contacts: np.ndarray,
-    normals: np.ndarray,
+    base_rotation: Any,
+    com: Any,
+    com_vel: Any,
+    com_acc: Any,
+    base_ang_acc: Any,
+    ext_force: Any,
+    ext_torque: Any,
+    feet: Any,
+    mu: Any,
+    contacts: Any,
+    normals: Any,
 ) -> StabilityState:
-    """lambda's fields (N, ...) from world-frame simulator quantities (all (N, ...), world frame, SI units).
+    """lambda's fields (N, ...) from world-frame simulator quantities (all (N, ...), world frame, SI units; all
+    numpy arrays or all torch tensors).
 
     e_g is the third row of the base rotation R_WB; every other vector v is rotated into H as
     R_WH^T v, and the feet are taken relative to the CoM first.
     """
+    xp = namespace(base_rotation)
     R_wh = heading_rotation(base_rotation)
 
-    def to_h(v: np.ndarray) -> np.ndarray:  # world -> H for (N, 3) or (N, k, 3)
-        return np.einsum("nji,n...j->n...i", R_wh, v)
+    def to_h(v: Any) -> Any:  # world -> H for (N, 3) or (N, k, 3)
+        return xp.einsum("nji,n...j->n...i", R_wh, v)
 
     return StabilityState(
         gravity_axis=base_rotation[:, 2, :],
@@ -58,20 +64,21 @@ def stability_state_from_simulation(
         ext_force=to_h(ext_force),
         ext_torque=to_h(ext_torque),
         feet=to_h(feet - com[:, None, :]),
-        mu=np.asarray(mu, dtype=float),
-        contacts=np.asarray(contacts, dtype=float),
+        mu=xp.astype(xp.asarray(mu), xp.float64),
+        contacts=xp.astype(xp.asarray(contacts), xp.float64),
         normals=to_h(normals),
     )
 
 
-def lambda_from_simulation(*args: np.ndarray, **kwargs: np.ndarray) -> np.ndarray:
+def lambda_from_simulation(*args: Any, **kwargs: Any) -> Any:
     """lambda (N, 47) from the arguments of :func:`stability_state_from_simulation`."""
     return stability_state_from_simulation(*args, **kwargs).to_lambda()
 
 
-def stance_width(feet_h: np.ndarray) -> np.ndarray:
+def stance_width(feet_h: Any) -> Any:
     """Mean lateral distance [m] between the left and right foot of the front and of the hind pair.
 
     ``feet_h`` (N, 4, 3): feet in H (LF, RF, LH, RH), e.g. :attr:`StabilityState.feet`.
     """
-    return 0.5 * (np.abs(feet_h[:, 0, 1] - feet_h[:, 1, 1]) + np.abs(feet_h[:, 2, 1] - feet_h[:, 3, 1]))
+    xp = namespace(feet_h)
+    return 0.5 * (xp.abs(feet_h[:, 0, 1] - feet_h[:, 1, 1]) + xp.abs(feet_h[:, 2, 1] - feet_h[:, 3, 1]))

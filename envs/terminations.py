@@ -23,8 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from array_api_compat import array_namespace
-
+from margin_rl.arrays import namespace
 from margin_rl.envs.config import TerminationConfig
 
 Arrays = dict[str, Any]
@@ -53,7 +52,7 @@ def info_key(cause: str) -> str:
 
 
 def _any_leg(s: Arrays, bounds: TerminationConfig) -> Any:
-    return array_namespace(s["thigh_contacts"]).any(s["thigh_contacts"], axis=1)
+    return namespace(s["thigh_contacts"]).any(s["thigh_contacts"], axis=1)
 
 
 TERMINATION_CAUSES: tuple[TerminationCause, ...] = (
@@ -73,7 +72,7 @@ INFO_KEYS: tuple[str, ...] = tuple(c.info_key for c in TERMINATION_CAUSES)
 
 def termination_causes(inputs: Arrays, bounds: TerminationConfig) -> dict[str, Any]:
     """Each cause's (N,) bool flags; a diverged environment has only ``diverged`` set (module docstring)."""
-    xp = array_namespace(inputs["diverged"])
+    xp = namespace(inputs["diverged"])
     finite_state = ~xp.astype(inputs["diverged"], xp.bool)
     causes = {}
     for cause in TERMINATION_CAUSES:
@@ -85,4 +84,4 @@ def termination_causes(inputs: Arrays, bounds: TerminationConfig) -> dict[str, A
 def any_cause(causes: dict[str, Any]) -> Any:
     """``terminated``: (N,) True where any cause holds."""
     flags = [causes[name] for name in CAUSE_NAMES]
-    return functools.reduce(array_namespace(*flags).logical_or, flags)
+    return functools.reduce(namespace(*flags).logical_or, flags)

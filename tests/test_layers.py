@@ -19,6 +19,7 @@ SOURCE_FOLDERS = {"margin_rl": "margin_rl", "envs": "margin_rl.envs", "train": "
 """Repository folder -> the package it is installed as (pyproject's package-dir)."""
 
 BASE_MODULES = (
+    "margin_rl.arrays",
     "margin_rl.atomic",
     "margin_rl.network",
     "margin_rl.plotting",

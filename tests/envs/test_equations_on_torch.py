@@ -1,6 +1,7 @@
-"""The environments' equations written once over numpy and torch (the array API standard's names): every reward term
-and every termination cause gives the same numbers on torch tensors as on numpy arrays, and numpy's own numbers
-(hand-checked values for the kernel and the clipped terms), for random inputs and for bad ones (NaN, inf)."""
+"""The environments' equations written once over numpy and torch (the array API standard's names, margin_rl.arrays):
+every reward term, every termination cause and lambda from the simulator give the same numbers on torch tensors as on
+numpy arrays, and numpy's own numbers (hand-checked values for the kernel and the clipped terms), for random inputs
+and for bad ones (NaN, inf)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,10 @@ from hypothesis import strategies as st
 
 from margin_rl.envs.config import TerminationConfig
 from margin_rl.envs.rewards import REWARD_TERMS, compute_rewards, logistic_kernel
+from margin_rl.envs.stability_input import heading_rotation, lambda_from_simulation, stance_width
 from margin_rl.envs.terminations import CAUSE_NAMES, any_cause, termination_causes
+from margin_rl.robot import quat_wxyz_to_matrix
+from margin_rl.stability import LAMBDA_DIM, from_lambda
 
 N = 16
 
@@ -94,3 +98,37 @@ def test_every_termination_cause_is_the_same_on_torch(seed: int) -> None:
         np.testing.assert_array_equal(causes_t[name].numpy(), causes[name], err_msg=name)
     np.testing.assert_array_equal(any_cause(causes_t).numpy(), any_cause(causes))
     assert [causes[name][0] for name in CAUSE_NAMES] == [name == "diverged" for name in CAUSE_NAMES]
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_lambda_from_the_simulation_is_the_same_on_torch(seed: int) -> None:
+    """lambda (seed 000 eq. 4) from world-frame quantities, its heading frame and the stance width: the same numbers
+    from torch tensors as from numpy arrays, and lambda's layout round-trips through from_lambda."""
+    rng = np.random.default_rng(seed)
+    quaternion = rng.normal(size=(N, 4))
+    quaternion /= np.linalg.norm(quaternion, axis=1, keepdims=True)
+    rotation = np.stack([quat_wxyz_to_matrix(q) for q in quaternion])
+    arguments = [
+        rotation,
+        rng.normal(size=(N, 3)),  # com
+        rng.normal(size=(N, 3)),  # com_vel
+        rng.normal(0, 5, (N, 3)),  # com_acc
+        rng.normal(0, 5, (N, 3)),  # base_ang_acc
+        rng.normal(0, 50, (N, 3)),  # ext_force
+        np.zeros((N, 3)),  # ext_torque
+        rng.normal(size=(N, 4, 3)),  # feet
+        rng.uniform(0.3, 1.0, N),  # mu
+        rng.random((N, 4)) < 0.7,  # contacts
+        rng.normal(size=(N, 4, 3)),  # normals
+    ]
+    lam = lambda_from_simulation(*arguments)
+    lam_t = lambda_from_simulation(*(torch.from_numpy(a) for a in arguments))
+    assert isinstance(lam, np.ndarray) and lam.shape == (N, LAMBDA_DIM) and lam_t.dtype == torch.float64
+    np.testing.assert_allclose(lam_t.numpy(), lam, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(from_lambda(lam).to_lambda(), lam)
+    heading = heading_rotation(rotation)
+    np.testing.assert_allclose(heading_rotation(torch.from_numpy(rotation)).numpy(), heading, atol=1e-15)
+    np.testing.assert_allclose(heading[:, 2], np.tile([0.0, 0.0, 1.0], (N, 1)))  # H keeps the world's z axis
+    feet_h = from_lambda(lam).feet
+    np.testing.assert_allclose(stance_width(torch.from_numpy(feet_h)).numpy(), stance_width(feet_h), atol=1e-15)

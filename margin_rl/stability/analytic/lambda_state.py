@@ -22,8 +22,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
+
+from margin_rl.arrays import namespace
 
 N_FEET = 4
 
@@ -165,17 +168,20 @@ class StabilityState:
     contacts: np.ndarray
     normals: np.ndarray
 
-    def to_lambda(self) -> np.ndarray:
-        """Flatten to (..., 47) in the order of :data:`LAMBDA_FIELDS`."""
-        batch = np.shape(self.mu)
+    def to_lambda(self) -> Any:
+        """Flatten to (..., 47) in the order of :data:`LAMBDA_FIELDS`, float64, as a numpy array or, when the
+        fields are torch tensors, a tensor on their device (:func:`margin_rl.arrays.namespace`)."""
+        values = [getattr(self, f.name) for f in LAMBDA_FIELDS]
+        xp = namespace(*values)
+        batch = tuple(xp.asarray(self.mu).shape)
         parts = []
-        for f in LAMBDA_FIELDS:
-            value = np.asarray(getattr(self, f.name), dtype=float)
+        for f, raw in zip(LAMBDA_FIELDS, values, strict=True):
+            value = xp.asarray(raw, dtype=xp.float64)
             expected = batch + (() if f.shape == (1,) else f.shape)
-            if value.shape != expected:
-                raise ValueError(f"StabilityState.{f.name} has shape {value.shape}, expected {expected}")
-            parts.append(value.reshape(*batch, f.size))
-        return np.concatenate(parts, axis=-1)
+            if tuple(value.shape) != expected:
+                raise ValueError(f"StabilityState.{f.name} has shape {tuple(value.shape)}, expected {expected}")
+            parts.append(xp.reshape(value, (*batch, f.size)))
+        return xp.concat(parts, axis=-1)
 
 
 assert [f.name for f in fields(StabilityState)] == [f.name for f in LAMBDA_FIELDS]  # one layout

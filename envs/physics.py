@@ -82,6 +82,18 @@ class PhysicsBackend(Protocol):
     def set_state(self, state: dict[str, Any]) -> None: ...
 
 
+def restore_per_env_fields(backend: PhysicsBackend, fields: dict[str, np.ndarray]) -> None:
+    """Write the per-environment model fields of a ``get_state`` into ``backend``; recompute the constants derived
+    from them (``set_const``) only where a field of :data:`SET_CONST_INPUTS` changed: recomputing them from unchanged
+    masses is wasted work in MuJoCo, and in Warp (float32) it would change their last bits, so that a restored copy
+    would not step identically."""
+    changed = {name for name, values in fields.items() if not np.array_equal(backend.per_env_field(name), values)}
+    for name in changed:
+        backend.per_env_field(name)[:] = fields[name]
+    if SET_CONST_INPUTS & changed:
+        backend.set_const()
+
+
 def render_data(model: mujoco.MjModel, qpos: np.ndarray, qvel: np.ndarray) -> mujoco.MjData:
     """An MjData of ``model`` at (qpos, qvel), forwarded by MuJoCo (for rendering one environment)."""
     data = mujoco.MjData(model)
@@ -214,10 +226,7 @@ class MujocoBatchPhysics(ModelConstants):
                 f"physics state of shape {rows.shape} does not fit this batch {self.batch.state.shape}: restore it "
                 "into a batch of the same model and number of environments"
             )
-        for name, values in state["per_env_fields"].items():
-            self.per_env_field(name)[:] = values
-        if SET_CONST_INPUTS & set(state["per_env_fields"]):
-            self.set_const()
+        restore_per_env_fields(self, state["per_env_fields"])
         self.batch.state[:] = rows
         # MuJoCo's forward pass resets a simulation holding NaN, inf or a value beyond mjMAXVAL (with a warning);
         # such a state (a diverged one, left for the next step to flag) is restored as it was, not forwarded.

@@ -41,7 +41,7 @@ except ImportError as exc:  # the optional dependency of the GPU path
         "and warp-lang, pinned together with mujoco), or use physics='mujoco'"
     ) from exc
 
-from margin_rl.envs.physics import SET_CONST_INPUTS, ModelConstants, render_data
+from margin_rl.envs.physics import ModelConstants, render_data, restore_per_env_fields
 
 # No start-up banner and no line per kernel module loaded or compiled (hundreds for ANYmal); warnings stay.
 wp.config.log_level = wp.LOG_WARNING
@@ -254,13 +254,7 @@ class WarpPhysics(ModelConstants):
                 f"physics state of shape {rows.shape} does not fit these worlds {tuple(self._state_rows.shape)}: "
                 "restore it into a backend of the same model and number of environments"
             )
-        changed = {n for n, v in state["per_env_fields"].items() if not np.array_equal(self.per_env_field(n), v)}
-        for name in changed:
-            self.per_env_field(name)[:] = state["per_env_fields"][name]
-        # Only where the masses changed: Warp's set_const recomputes the derived constants in float32, which differ
-        # in the last bits from put_model's (MuJoCo's float64), and the restored worlds would not step identically.
-        if SET_CONST_INPUTS & changed:
-            self.set_const()
+        restore_per_env_fields(self, state["per_env_fields"])
         self._state_rows.numpy()[:] = rows
         with wp.ScopedDevice(self.device):
             mjw.set_state(self._model, self._data, self._state_rows, INTEGRATION_STATE)

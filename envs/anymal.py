@@ -89,6 +89,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
+from margin_rl.arrays import to_numpy
 from margin_rl.envs.backends import PHYSICS_BACKENDS
 from margin_rl.envs.config import EnvConfig, check_int
 from margin_rl.envs.core import ACTION_BOUND, AnymalCore
@@ -333,7 +334,7 @@ class AnymalEnv(gymnasium.Env):
         check_reset_options(options, type(self).__name__)
         super().reset(seed=seed)
         self.core.reset(seed=seed)
-        observation = self.core.observe_all()[0]
+        observation = to_numpy(self.core.observe_all()[0])
         self._needs_reset = False
         return observation, {}
 
@@ -345,7 +346,7 @@ class AnymalEnv(gymnasium.Env):
             (ACTION_SIZE,),
             "one environment takes one action of 12 numbers (use gymnasium.make_vec for a batch)",
         )
-        out = self.core.step(action[None])
+        out = self.core.step(action[None]).to_numpy()
         info = {k: (v[0] if v.ndim == 1 else v[0].copy()) for k, v in out.info.items()}
         info = {k: float(v) if np.ndim(v) == 0 else v for k, v in info.items()}
         if self.render_mode == "human":

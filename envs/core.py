@@ -39,7 +39,9 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from array_api_compat import device as device_of
 
+from margin_rl.arrays import like, namespace, random_generator, to_numpy
 from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, make_physics
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.margin_kinds import MARGIN_KINDS, make_margin_function
@@ -85,6 +87,11 @@ MARGIN_CLIP: tuple[float, float] = (-0.5, 0.5)
 DIVERGED_SPEED = 1e3
 """A generalised velocity above this (m/s, rad/s) marks a simulation as diverged."""
 
+DEVICE_CHECK_STEPS = 24
+"""Policy steps between two checks of a device physics' buffers (``check_overflow``, a host read): the rollout
+length of the recipes, so once per PPO iteration. Overflows are kept on the device until then; on the host the
+check costs nothing and runs every step."""
+
 
 def check_margin_runs_on(kind: str, physics: str) -> None:
     """ValueError where margin kind ``kind`` cannot run beside backend ``physics`` (the LP kinds solve on the
@@ -129,30 +136,34 @@ class AnymalCore:
         terrain = flat_terrain() if config.terrain == "flat" else rough_terrain(config.terrain_config, seed or 0)
         backend = PhysicsChoice(physics, physics_device, dict(physics_options or {}))
         self._build(config, num_envs, autoreset, truncate, terrain, backend)
-        self.rng = np.random.default_rng(seed)
-        self._added_mass = np.zeros(num_envs)
+        self.rng = random_generator(seed, self.physics.qpos)
+        xp, n = self.xp, num_envs
+
+        def zeros(*shape: int, dtype: Any = xp.float64) -> Any:
+            return xp.zeros(shape, dtype=dtype, device=self.device)
+
+        self._added_mass = zeros(n)
         if config.randomization.added_base_mass is not None:
             masses = self.physics.per_env_field("body_mass")
             self._added_mass = self.rng.uniform(*config.randomization.added_base_mass, size=num_envs)
-            masses[:, self._base] = self.physics.body_mass(self._base) + self._added_mass
+            masses[:, self._base] = self._cast(self.physics.body_mass(self._base) + self._added_mass, masses)
             self.physics.set_const()
-        n = num_envs
-        self.command = np.zeros((n, 3))
-        self.last_action = np.zeros((n, 12))
-        self.episode_step = np.zeros(n, dtype=np.int64)
-        self._prev_com_vel = np.zeros((n, 3))
-        self._prev_ang_vel = np.zeros((n, 3))
-        self._prev_joint_vel = np.zeros((n, 12))
-        self._com_acc = np.zeros((n, 3))
-        self._ang_acc = np.zeros((n, 3))
-        self._air_time = np.zeros((n, 4))
-        self._prev_contacts = np.ones((n, 4), dtype=bool)
-        self._push_steps_left = np.zeros(n, dtype=np.int64)
-        self._push_force = np.zeros((n, 3))
-        self._push_applied = np.zeros((n, 3))
-        self._next_push = np.full(n, np.inf)
-        self._last_margin = np.zeros(n)
-        self._last_lambda = np.zeros((n, LAMBDA_DIM))
+        self.command = zeros(n, 3)
+        self.last_action = zeros(n, 12)
+        self.episode_step = zeros(n, dtype=xp.int64)
+        self._prev_com_vel = zeros(n, 3)
+        self._prev_ang_vel = zeros(n, 3)
+        self._prev_joint_vel = zeros(n, 12)
+        self._com_acc = zeros(n, 3)
+        self._ang_acc = zeros(n, 3)
+        self._air_time = zeros(n, 4)
+        self._prev_contacts = xp.ones((n, 4), dtype=xp.bool, device=self.device)
+        self._push_steps_left = zeros(n, dtype=xp.int64)
+        self._push_force = zeros(n, 3)
+        self._push_applied = zeros(n, 3)
+        self._next_push = xp.full(n, xp.inf, dtype=xp.float64, device=self.device)
+        self._last_margin = zeros(n)
+        self._last_lambda = zeros(n, LAMBDA_DIM)
 
     def _build(
         self,
@@ -174,26 +185,50 @@ class AnymalCore:
         self.model = build_model(self.robot, self.terrain, config.terrain_config)
         self.physics: PhysicsBackend = make_physics(backend.name, self.model, num_envs, backend.device, backend.options)
         physics, legs = self.physics, self.robot.leg_names
+        # The core computes where the physics' arrays live: numpy on the host beside mujoco.batch, torch tensors on
+        # the device beside Warp (margin_rl.arrays), in float64 either way (a device's tensors here are small: its
+        # step is bound by kernel launches, not by memory traffic).
+        self.xp = namespace(physics.qpos)
+        self.device = device_of(physics.qpos)
+        self._steps_since_check = 0
         self.dt = float(physics.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
         self._base = physics.body_id(names.BASE_BODY)
-        self._feet = np.array([physics.site_id(f) for f in self.robot.foot_names])
+        self._feet = self._index([physics.site_id(f) for f in self.robot.foot_names])
         # The shank body's origin is the knee (KFE) joint, the lower end of the thigh whose contact ends an episode.
-        self._knees = np.array([physics.body_id(names.shank_body(leg)) for leg in legs])
+        self._knees = self._index([physics.body_id(names.shank_body(leg)) for leg in legs])
         self._com_sensor = physics.sensor_slice(names.COM_SENSOR)
         self._com_vel_sensor = physics.sensor_slice(names.COM_VELOCITY_SENSOR)
         # First entry ("found") of each contact sensor, gathered with one index per step.
-        self._foot_contact_adr = np.array([physics.sensor_adr(names.foot_contact_sensor(leg)) for leg in legs])
-        self._thigh_contact_adr = np.array([physics.sensor_adr(names.thigh_contact_sensor(leg)) for leg in legs])
+        self._foot_contact_adr = self._index([physics.sensor_adr(names.foot_contact_sensor(leg)) for leg in legs])
+        self._thigh_contact_adr = self._index([physics.sensor_adr(names.thigh_contact_sensor(leg)) for leg in legs])
         self._base_contact_adr = physics.sensor_adr(names.BASE_CONTACT_SENSOR)
-        self._key, self._key_qpos, self._key_ctrl = physics.keyframe(names.STANDING_KEYFRAME)
-        self._standing_joint_pos = self.robot.standing_joint_pos
+        self._key, key_qpos, key_ctrl = physics.keyframe(names.STANDING_KEYFRAME)
+        self._key_qpos, self._key_ctrl = self._array(key_qpos), self._array(key_ctrl)
+        self._standing_joint_pos = self._array(self.robot.standing_joint_pos)
         self._floor = physics.geom_id(names.FLOOR_GEOM)
         self._friction = physics.per_env_field("geom_friction")
-        self.mu = np.full(num_envs, physics.geom_friction(self._floor))
+        self.mu = self.xp.full(num_envs, physics.geom_friction(self._floor), dtype=self.xp.float64, device=self.device)
         self._margin_fn = make_margin_function(config.margin, self.robot, config.margin_weights, MARGIN_CLIP[0])
         self.observation_size = sum(t.size for t in POLICY_OBSERVATIONS)
         self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
+
+    # ------------------------------------------------------------------ arrays
+    def _array(self, value: Any, dtype: Any = None) -> Any:
+        """``value`` (numpy, Python or a tensor) as an array of the core's kind, on its device (numpy: unchanged)."""
+        return like(value, self.physics.qpos, dtype)
+
+    def _index(self, values: Any) -> Any:
+        """Integer indices (environments, sites, sensors) as the core's int64 array."""
+        return self._array(np.asarray(values, dtype=np.int64))
+
+    def _cast(self, value: Any, target: Any) -> Any:
+        """``value`` in ``target``'s dtype, to be written into it (a no-op where they agree, e.g. numpy float64)."""
+        return self.xp.astype(value, target.dtype, copy=False)
+
+    def _float(self, value: Any) -> Any:
+        """A physics array (float32 in Warp) as float64, the core's precision (a no-op for mujoco.batch's)."""
+        return self.xp.astype(value, self.xp.float64, copy=False)
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
@@ -243,35 +278,39 @@ class AnymalCore:
         commands, noise, pushes), so the same seed gives the same rollout.
         """
         if seed is not None:
-            self.rng = np.random.default_rng(seed)
-        ids = np.arange(self.num_envs) if ids is None else np.asarray(ids, dtype=np.int64)
-        if ids.size == 0:
+            self.rng = random_generator(seed, self.physics.qpos)
+        xp = self.xp
+        ids = xp.arange(self.num_envs, device=self.device) if ids is None else self._index(ids)
+        n = int(ids.shape[0])
+        if n == 0:
             return
         cfg, rnd, rng, physics = self.config, self.config.randomization, self.rng, self.physics
         physics.reset(ids, self._key)
-        qpos = np.tile(self._key_qpos, (len(ids), 1))
-        spawn = self.terrain.spawn_points[rng.integers(0, len(self.terrain.spawn_points), size=len(ids))]
+        qpos = xp.asarray(xp.broadcast_to(self._key_qpos, (n, self._key_qpos.shape[0])), copy=True)
+        spawn_points = self.terrain.spawn_points_like(qpos)
+        spawn = spawn_points[rng.integers(0, spawn_points.shape[0], size=n)]
         base_pos = qpos[:, names.BASE_POSITION_QPOS]  # a view: writes go to qpos
         base_pos[:, :2] = spawn[:, :2]
         base_pos[:, 2] = spawn[:, 2] + self._key_qpos[names.BASE_POSITION_QPOS][2] + 0.02  # 2 cm above the ground
-        qpos[:, names.JOINT_QPOS] += rng.uniform(-1, 1, size=(len(ids), 12)) * rnd.reset_joint_noise
-        qvel = np.zeros((len(ids), physics.nv))
-        qvel[:, names.BASE_QVEL] = rng.uniform(-1, 1, size=(len(ids), 6)) * rnd.reset_velocity_noise
-        physics.qpos[ids] = qpos
-        physics.qvel[ids] = qvel
-        physics.ctrl[ids] = self._key_ctrl
+        qpos[:, names.JOINT_QPOS] += rng.uniform(-1, 1, size=(n, 12)) * rnd.reset_joint_noise
+        qvel = xp.zeros((n, physics.nv), dtype=xp.float64, device=self.device)
+        qvel[:, names.BASE_QVEL] = rng.uniform(-1, 1, size=(n, 6)) * rnd.reset_velocity_noise
+        physics.qpos[ids] = self._cast(qpos, physics.qpos)
+        physics.qvel[ids] = self._cast(qvel, physics.qvel)
+        physics.ctrl[ids] = self._cast(self._key_ctrl, physics.ctrl)
         physics.xfrc_applied[ids] = 0.0
         if rnd.friction is not None:
-            self.mu[ids] = rng.uniform(*rnd.friction, size=len(ids))
-            self._friction[ids, self._floor, 0] = self.mu[ids]
+            self.mu[ids] = rng.uniform(*rnd.friction, size=n)
+            self._friction[ids, self._floor, 0] = self._cast(self.mu[ids], self._friction)
         physics.forward(ids)
         c = cfg.command
-        self.command[ids] = np.column_stack(
+        self.command[ids] = xp.stack(
             [
-                rng.uniform(*c.forward_velocity, len(ids)),
-                rng.uniform(*c.lateral_velocity, len(ids)),
-                rng.uniform(*c.yaw_rate, len(ids)),
-            ]
+                rng.uniform(*c.forward_velocity, n),
+                rng.uniform(*c.lateral_velocity, n),
+                rng.uniform(*c.yaw_rate, n),
+            ],
+            axis=1,
         )
         self.last_action[ids] = 0.0
         self.episode_step[ids] = 0
@@ -287,13 +326,13 @@ class AnymalCore:
         self._push_force[ids] = 0.0
         self._push_applied[ids] = 0.0
         if rnd.push_interval_s is not None:
-            self._next_push[ids] = rng.exponential(rnd.push_interval_s / self.dt, size=len(ids))
+            self._next_push[ids] = rng.exponential(rnd.push_interval_s / self.dt, size=n)
 
     # ------------------------------------------------------------------ state
-    def _read(self, ids: np.ndarray | slice = slice(None)) -> SimulationState:
-        """World-frame state of environments ``ids`` from the batch's live arrays."""
-        physics = self.physics
-        qpos, qvel, sens = physics.qpos[ids], physics.qvel[ids], physics.sensordata[ids]
+    def _read(self, ids: Any = slice(None)) -> SimulationState:
+        """World-frame state of environments ``ids`` from the batch's live arrays (float64)."""
+        physics, f = self.physics, self._float
+        qpos, qvel, sens = f(physics.qpos[ids]), f(physics.qvel[ids]), f(physics.sensordata[ids])
         R = quat_wxyz_to_matrix(qpos[:, names.BASE_QUATERNION_QPOS])
         ang_vel_body = qvel[:, names.BASE_ANGULAR_VELOCITY_QVEL]
         return SimulationState(
@@ -301,16 +340,16 @@ class AnymalCore:
             base_rot=R,
             lin_vel_world=qvel[:, names.BASE_LINEAR_VELOCITY_QVEL],
             ang_vel_body=ang_vel_body,
-            ang_vel_world=np.einsum("nij,nj->ni", R, ang_vel_body),
+            ang_vel_world=self.xp.einsum("nij,nj->ni", R, ang_vel_body),
             joint_pos=qpos[:, names.JOINT_QPOS],
             joint_vel=qvel[:, names.JOINT_QVEL],
             com=sens[:, self._com_sensor],
             com_vel=sens[:, self._com_vel_sensor],
-            feet=physics.site_xpos[ids][:, self._feet],
+            feet=f(physics.site_xpos[ids][:, self._feet]),
             contacts=sens[:, self._foot_contact_adr] > 0,
             base_contact=sens[:, self._base_contact_adr] > 0,
             thigh_contacts=sens[:, self._thigh_contact_adr] > 0,
-            knees=physics.xpos[ids][:, self._knees],
+            knees=f(physics.xpos[ids][:, self._knees]),
         )
 
     # ------------------------------------------------------------------ step
@@ -328,7 +367,7 @@ class AnymalCore:
         values = {
             **self._policy_values(state, slice(None)),
             "margin": margin,
-            "torques": self.physics.actuator_force.copy(),
+            "torques": self.xp.astype(self.physics.actuator_force, self.xp.float64),  # a copy
             "action": action,
             "last_action": self.last_action,
             "joint_acc": acc.joints,
@@ -340,46 +379,53 @@ class AnymalCore:
         weights = cfg.reward_weights
         if "knee_clearance" in weights:  # a terrain lookup per knee: only when the term is on
             values["knee_heights"] = state.knees[..., 2] - self.terrain.height(state.knees[..., :2])
-            values["knee_clearance_height"] = np.full(self.num_envs, cfg.reward_params.knee_clearance_height)
+            values["knee_clearance_height"] = self._full(cfg.reward_params.knee_clearance_height)
         if "base_height" in weights:
-            target = cfg.reward_params.base_height_fraction * self.robot.standing_height
-            values["base_height_target"] = np.full(self.num_envs, target)
+            values["base_height_target"] = self._full(
+                cfg.reward_params.base_height_fraction * self.robot.standing_height
+            )
         reward, terms = compute_rewards(weights, values, cfg.reward_params.logistic_gain)
-        self.last_action = action.copy()
+        self.last_action = self.xp.asarray(action, copy=True)
         causes = self._terminations(state, base_height, diverged)
         terminated = any_cause(causes)
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
         info = self._info(state, acc, values, terms, margin, stability, terminated, diverged, causes)
         observation = self._observe(values)
-        final_observation = observation.copy()
+        final_observation = self.xp.asarray(observation, copy=True)
         done = terminated | truncated
-        if self.autoreset and done.any():
-            ids = np.nonzero(done)[0]
+        if self.autoreset and bool(self.xp.any(done)):
+            ids = self.xp.nonzero(done)[0]
             self.reset(ids)
             observation[ids] = self._observe_ids(ids)
         privileged = self.privileged_observation() if cfg.privileged_observations else None
         check_finite_outputs(cfg, reward, observation, final_observation)
         return StepOutput(observation, reward, terminated, truncated, info, final_observation, privileged)
 
-    def _actuate(self, actions: np.ndarray) -> np.ndarray:
-        """Clip the actions, write the servo targets and this step's pushes; returns the clipped actions."""
-        a = np.asarray(actions, dtype=np.float64)
-        if a.shape != (self.num_envs, 12):
-            raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {a.shape}")
-        if not np.all(np.isfinite(a)):
+    def _full(self, value: float) -> Any:
+        """(N,) float64 of ``value``."""
+        return self.xp.full(self.num_envs, value, dtype=self.xp.float64, device=self.device)
+
+    def _actuate(self, actions: Any) -> Any:
+        """Clip the actions (numpy or the core's kind), write the servo targets and this step's pushes; returns the
+        clipped actions (N, 12) float64."""
+        xp = self.xp
+        a = self._array(actions, xp.float64)
+        if tuple(a.shape) != (self.num_envs, 12):
+            raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {tuple(a.shape)}")
+        if not bool(xp.all(xp.isfinite(a))):
             raise ValueError("actions contain NaN or inf")
-        a = np.clip(a, -ACTION_BOUND, ACTION_BOUND)
-        self.physics.ctrl[:] = self._key_ctrl + self.config.action_scale * a
+        a = xp.clip(a, -ACTION_BOUND, ACTION_BOUND)
+        self.physics.ctrl[:] = self._cast(self._key_ctrl + self.config.action_scale * a, self.physics.ctrl)
         self._apply_pushes()
         return a
 
-    def _invalid_state(self) -> np.ndarray:
+    def _invalid_state(self) -> Any:
         """(N,) True where qpos or qvel is non-finite or a velocity exceeds :data:`DIVERGED_SPEED`."""
-        qpos, qvel = self.physics.qpos, self.physics.qvel
+        xp, qpos, qvel = self.xp, self.physics.qpos, self.physics.qvel
         return (
-            ~np.all(np.isfinite(qvel), axis=1)
-            | np.any(np.abs(qvel) > DIVERGED_SPEED, axis=1)
-            | ~np.all(np.isfinite(qpos), axis=1)
+            ~xp.all(xp.isfinite(qvel), axis=1)
+            | xp.any(xp.abs(qvel) > DIVERGED_SPEED, axis=1)
+            | ~xp.all(xp.isfinite(qpos), axis=1)
         )
 
     def _simulate(self) -> np.ndarray:
@@ -389,15 +435,23 @@ class AnymalCore:
         a simulation whose accelerations blow up (a "bad QACC" warning) instead of raising; its clock then fails
         to advance by the step, which is how such a divergence is caught here.
         """
-        physics = self.physics
+        physics, xp = self.physics, self.xp
         diverged = self._invalid_state()
-        time_before = physics.time.copy()
+        time_before = xp.astype(physics.time, xp.float64)  # a copy
         failed = physics.step(self.config.decimation)
-        physics.check_overflow()  # dropped contacts would make every later step of a world wrong: stop here
+        self._check_physics()
         diverged[failed] = True  # a simulation failed: end its episode, keep the others
         expected = time_before + self.config.decimation * physics.timestep
-        diverged |= np.abs(physics.time - expected) > 0.5 * physics.timestep
+        diverged |= xp.abs(self._float(physics.time) - expected) > 0.5 * physics.timestep
         return diverged | self._invalid_state()
+
+    def _check_physics(self) -> None:
+        """The backend's buffer check (dropped contacts would make every later step of a world wrong): every step
+        on the host, every :data:`DEVICE_CHECK_STEPS` steps on a device (it reads the device's flags)."""
+        self._steps_since_check += 1
+        if str(self.device) == "cpu" or self._steps_since_check >= DEVICE_CHECK_STEPS:
+            self._steps_since_check = 0
+            self.physics.check_overflow()
 
     def _measure(self, diverged: np.ndarray) -> SimulationState:
         """The state after the step; a diverged environment's numbers are made finite for the bookkeeping."""
@@ -412,8 +466,9 @@ class AnymalCore:
         self._com_acc = alpha * self._com_acc + (1 - alpha) * com_acc
         self._ang_acc = alpha * self._ang_acc + (1 - alpha) * ang_acc
         joint_acc = (state.joint_vel - self._prev_joint_vel) / self.dt
-        self._prev_com_vel, self._prev_ang_vel = state.com_vel.copy(), state.ang_vel_world.copy()
-        self._prev_joint_vel = state.joint_vel.copy()
+        copy = self.xp.asarray
+        self._prev_com_vel, self._prev_ang_vel = copy(state.com_vel, copy=True), copy(state.ang_vel_world, copy=True)
+        self._prev_joint_vel = copy(state.joint_vel, copy=True)
         return Accelerations(self._com_acc, self._ang_acc, joint_acc, com_acc, ang_acc)
 
     def _stability(self, state: SimulationState, acc: Accelerations) -> tuple[StabilityState, np.ndarray]:
@@ -426,14 +481,14 @@ class AnymalCore:
             acc.com,
             acc.base_angular,
             ext_force,
-            np.zeros_like(ext_force),
+            self.xp.zeros_like(ext_force),
             state.feet,
             self.mu,
             state.contacts,
             self.terrain.normal(state.feet[..., :2]),
         )
         lam = stability.to_lambda()
-        margin = np.clip(self._margin_fn(lam), *MARGIN_CLIP)
+        margin = self.xp.clip(self._margin_fn(lam), *MARGIN_CLIP)
         self._last_margin, self._last_lambda = margin, lam
         return stability, margin
 
@@ -442,11 +497,12 @@ class AnymalCore:
 
         Kept before the rewards so that a zero reward weight changes nothing.
         """
+        xp = self.xp
         touchdown = contacts & ~self._prev_contacts
         self._air_time += self.dt
-        air_at_touchdown = np.where(touchdown, self._air_time, 0.0)
-        self._air_time = np.where(contacts, 0.0, self._air_time)
-        self._prev_contacts = contacts.copy()
+        air_at_touchdown = xp.where(touchdown, self._air_time, 0.0)
+        self._air_time = xp.where(contacts, 0.0, self._air_time)
+        self._prev_contacts = xp.asarray(contacts, copy=True)
         return touchdown, air_at_touchdown
 
     def _terminations(
@@ -476,22 +532,26 @@ class AnymalCore:
         causes: dict[str, np.ndarray],
     ) -> dict[str, np.ndarray]:
         """The per-environment step info (every weighted reward term, margin, accelerations, gait, flags)."""
-        R = state.base_rot
+        xp, R = self.xp, state.base_rot
+
+        def flag(value: Any) -> Any:
+            return xp.astype(value, xp.float64)
+
         return {
             **{f"reward_{k}": v for k, v in terms.items()},
             "margin": margin,
             # Unfiltered: the robot's accelerations, the comparison's metrics (lambda has the filtered ones).
-            "base_lin_acc": np.einsum("nji,nj->ni", R, acc.com_measured),  # CoM acceleration, base frame
-            "base_ang_acc": np.einsum("nji,nj->ni", R, acc.base_angular_measured),  # base frame
+            "base_lin_acc": xp.einsum("nji,nj->ni", R, acc.com_measured),  # CoM acceleration, base frame
+            "base_ang_acc": xp.einsum("nji,nj->ni", R, acc.base_angular_measured),  # base frame
             "base_lin_vel": values["base_lin_vel"],
-            "velocity_error": np.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
-            "contacts": state.contacts.astype(np.float64),
+            "velocity_error": xp.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
+            "contacts": flag(state.contacts),
             "stance_width": stance_width(stability.feet),  # feet in H, as they entered lambda
             "base_height": values["base_height"],  # base origin above the terrain under it [m]
             "lambda": self._last_lambda,  # (N, 47), the margin's input (names: stability.lambda_names())
-            "fell": (terminated & ~diverged).astype(np.float64),
-            "diverged": diverged.astype(np.float64),
-            **{info_key(name): flags.astype(np.float64) for name, flags in causes.items()},
+            "fell": flag(terminated & ~diverged),
+            "diverged": flag(diverged),
+            **{info_key(name): flag(flags) for name, flags in causes.items()},
         }
 
     def push(self, ids: np.ndarray, force: np.ndarray, duration_s: float, frame: str = "world") -> None:
@@ -505,18 +565,19 @@ class AnymalCore:
             ValueError: ``force`` is not (len(ids), 3) and finite, ``ids`` out of range, duration <= 0 or an
                 unknown frame.
         """
-        ids = np.atleast_1d(np.asarray(ids, dtype=np.int64))
-        force = np.asarray(force, dtype=np.float64)
+        ids = np.atleast_1d(np.asarray(to_numpy(ids), dtype=np.int64))
+        force = np.asarray(to_numpy(force), dtype=np.float64)
         if ids.size and (ids.min() < 0 or ids.max() >= self.num_envs):
             raise ValueError(f"push ids must lie in [0, {self.num_envs}), got {ids.min()}..{ids.max()}")
         if force.shape != (len(ids), 3) or not np.all(np.isfinite(force)):
             raise ValueError(f"push force must be finite with shape (len(ids), 3) = ({len(ids)}, 3), got {force.shape}")
+        ids, force = self._index(ids), self._array(force)
         if not duration_s > 0:
             raise ValueError(f"push duration_s must be > 0 [s], got {duration_s}")
         if frame not in ("world", "heading"):
             raise ValueError(f"push frame must be 'world' or 'heading', got {frame!r}")
         if frame == "heading":
-            force = np.einsum("nij,nj->ni", heading_rotation(self._read(ids).base_rot), force)
+            force = self.xp.einsum("nij,nj->ni", heading_rotation(self._read(ids).base_rot), force)
         self._push_force[ids] = force
         self._push_steps_left[ids] = self.push_steps(duration_s)
 
@@ -533,17 +594,18 @@ class AnymalCore:
             self._start_random_pushes(rnd)
         active = self._push_steps_left > 0
         # The force of this step, kept for lambda: the counter below already reads 0 during a push's last step.
-        self._push_applied = np.where(active[:, None], self._push_force, 0.0)
-        xfrc[active, self._base, :3] = self._push_force[active]
-        self._push_steps_left = np.maximum(self._push_steps_left - 1, 0)
+        self._push_applied = self.xp.where(active[:, None], self._push_force, 0.0)
+        xfrc[active, self._base, :3] = self._cast(self._push_force[active], xfrc)
+        self._push_steps_left = self.xp.clip(self._push_steps_left - 1, min=0)
 
     def _start_random_pushes(self, rnd: RandomizationConfig) -> None:
         self._next_push -= 1
         start = self._next_push <= 0
-        if start.any():
-            angle = self.rng.uniform(0, 2 * np.pi, size=int(start.sum()))
-            self._push_force[start] = rnd.push_force * np.column_stack(
-                [np.cos(angle), np.sin(angle), np.zeros_like(angle)]
+        if bool(self.xp.any(start)):
+            xp = self.xp
+            angle = self.rng.uniform(0, 2 * np.pi, size=int(xp.sum(start)))
+            self._push_force[start] = rnd.push_force * xp.stack(
+                [xp.cos(angle), xp.sin(angle), xp.zeros_like(angle)], axis=1
             )
             self._push_steps_left[start] = self.push_steps(rnd.push_duration_s)
             self._next_push[start] = self.rng.exponential(rnd.push_interval_s / self.dt, size=int(start.sum()))
@@ -562,7 +624,7 @@ class AnymalCore:
         """The robot-state terms of the observation (and the rewards), from a state read of ``ids``."""
         R = state.base_rot
         return {
-            "base_lin_vel": np.einsum("nji,nj->ni", R, state.lin_vel_world),  # base frame
+            "base_lin_vel": self.xp.einsum("nji,nj->ni", R, state.lin_vel_world),  # base frame
             "base_ang_vel": state.ang_vel_body,
             "projected_gravity": -R[:, 2, :],
             "command": self.command[ids],
@@ -574,20 +636,20 @@ class AnymalCore:
         """Policy observations of every environment (after :meth:`reset`)."""
         return self.observe(np.arange(self.num_envs))
 
-    def observe(self, ids: np.ndarray) -> np.ndarray:
+    def observe(self, ids: Any) -> Any:
         """Policy observations (len(ids), obs) of environments ``ids`` (e.g. just reset)."""
-        observations = self._observe_ids(np.asarray(ids, dtype=np.int64))
+        observations = self._observe_ids(self._index(ids))
         check_finite_outputs(self.config, 0.0, observations)
         return observations
 
     def privileged_observation(self) -> np.ndarray:
         """Critic group: terrain heights around the feet, friction and the current margin."""
-        feet = self.physics.site_xpos[:, self._feet]
-        offsets = np.array(FOOT_HEIGHT_OFFSETS)
+        feet = self._float(self.physics.site_xpos[:, self._feet])
+        offsets = self._array(np.array(FOOT_HEIGHT_OFFSETS))
         points = feet[:, :, None, :2] + offsets[None, None]
         heights = feet[:, :, None, 2] - self.terrain.height(points)
         values = {
-            "foot_terrain_heights": heights.reshape(self.num_envs, -1),
+            "foot_terrain_heights": self.xp.reshape(heights, (self.num_envs, -1)),
             "friction": self.mu[:, None],
             "margin": self._last_margin[:, None],
         }

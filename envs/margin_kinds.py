@@ -16,15 +16,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from array_api_compat import device as device_of
 from threadpoolctl import ThreadpoolController
 
+from margin_rl.arrays import namespace
 from margin_rl.robot import Robot
 from margin_rl.stability.learned.model import LearnedMargin
 
-MarginFunction = Callable[[np.ndarray], np.ndarray]
-"""lambda (N, 47) -> margin (N,)."""
+MarginFunction = Callable[[Any], Any]
+"""lambda (N, 47) -> margin (N,): numpy arrays for every kind; torch tensors (on their device) for the batched kinds
+(:attr:`MarginKind.batched`), which answer in the same kind."""
 
 
 def check_margin_kind(name: object) -> str:
@@ -50,18 +54,33 @@ def _per_state(criterion: Callable[[np.ndarray], float], floor: float) -> Margin
 
 
 def _no_margin(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
-    return lambda lam: np.zeros(len(lam))
+    def zero(lam: Any) -> Any:
+        xp = namespace(lam)
+        return xp.zeros(lam.shape[0], dtype=xp.float64, device=device_of(lam))
+
+    return zero
 
 
 def _learned_margin(robot: Robot, weights: str | None, floor: float) -> MarginFunction:
+    """The one network of the robot's weights: its numpy form on the host, its torch form (float32, like the numpy
+    batch path) on a tensor's device, built there on first use."""
     model = LearnedMargin.load(weights or robot.name)
     # OpenBLAS threads even these small GEMMs; on a few cores they collide with MuJoCo's thread
     # pool (measured 4x slower env steps), so the margin runs on one BLAS thread (~16 us to switch).
     blas = ThreadpoolController()
+    modules: dict[str, Any] = {}
 
-    def learned(lam: np.ndarray) -> np.ndarray:
-        with blas.limit(limits=1, user_api="blas"):
-            return np.asarray(model(lam))
+    def learned(lam: Any) -> Any:
+        if namespace(lam) is np:
+            with blas.limit(limits=1, user_api="blas"):
+                return np.asarray(model(lam))
+        import torch  # a tensor: torch is loaded already
+
+        key = str(lam.device)
+        if key not in modules:
+            modules[key] = model.torch_module(torch.float32).to(lam.device).eval()
+        with torch.no_grad():
+            return modules[key](lam.to(torch.float32)).to(torch.float64)
 
     return learned
 

@@ -10,8 +10,9 @@ gravity projected into the base frame, joint positions relative to the standing 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
-import numpy as np
+from margin_rl.arrays import namespace
 
 
 @dataclass(frozen=True)
@@ -60,14 +61,16 @@ def observation_size(terms: tuple[ObservationTerm, ...] = POLICY_OBSERVATIONS) -
     return sum(t.size for t in terms)
 
 
-def assemble(
-    values: dict[str, np.ndarray], terms: tuple[ObservationTerm, ...], noise_level: float, rng: np.random.Generator
-) -> np.ndarray:
-    """Concatenate scaled (and optionally noisy) terms: values[name] has shape (N, size) -> (N, total)."""
+def assemble(values: dict[str, Any], terms: tuple[ObservationTerm, ...], noise_level: float, rng: Any) -> Any:
+    """Concatenate scaled (and optionally noisy) terms: values[name] has shape (N, size) -> (N, total) float32.
+
+    ``values``: all numpy arrays or all torch tensors (:mod:`margin_rl.arrays`); ``rng``: a generator of their kind
+    (:func:`margin_rl.arrays.random_generator`)."""
+    xp = namespace(*values.values())
     parts = []
     for t in terms:
-        v = np.asarray(values[t.name], dtype=np.float64).reshape(-1, t.size)
+        v = xp.reshape(xp.astype(xp.asarray(values[t.name]), xp.float64, copy=False), (-1, t.size))
         if noise_level > 0 and t.noise > 0:
             v = v + rng.uniform(-1.0, 1.0, size=v.shape) * t.noise * noise_level
         parts.append(v * t.scale)
-    return np.concatenate(parts, axis=1).astype(np.float32)
+    return xp.astype(xp.concat(parts, axis=1), xp.float32)

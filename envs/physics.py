@@ -26,6 +26,8 @@ import mujoco
 import numpy as np
 from mujoco import batch as mj_batch
 
+from margin_rl.arrays import like, to_numpy
+
 SET_CONST_INPUTS = frozenset({"body_mass"})
 """Per-environment model fields written here that MuJoCo derives constants from (``mj_setConst``)."""
 
@@ -41,10 +43,11 @@ def usable_cores() -> int:
 class PhysicsBackend(Protocol):
     """The written contract of a physics backend: every member :class:`~margin_rl.envs.core.AnymalCore` uses.
 
-    Live arrays, ``(num_envs, ...)`` (numpy, writes take effect at the next call, outputs refreshed by every
-    call): ``qpos``, ``qvel``, ``ctrl``, ``xfrc_applied`` (``(num_envs, nbody, 6)``), ``time``; ``sensordata``,
-    ``site_xpos``, ``xpos``, ``actuator_force``. Model constants are read by name from ``model`` (the MjModel the
-    backend was built from). Both backends are checked against this protocol by the tests, member by member.
+    Live arrays, ``(num_envs, ...)`` (numpy arrays on the host, or torch tensors on the backend's device; writes
+    take effect at the next call, outputs refreshed by every call): ``qpos``, ``qvel``, ``ctrl``, ``xfrc_applied``
+    (``(num_envs, nbody, 6)``), ``time``; ``sensordata``, ``site_xpos``, ``xpos``, ``actuator_force``. Model
+    constants are read by name from ``model`` (the MjModel the backend was built from). Both backends are checked
+    against this protocol by the tests, member by member.
     """
 
     model: mujoco.MjModel
@@ -87,9 +90,12 @@ def restore_per_env_fields(backend: PhysicsBackend, fields: dict[str, np.ndarray
     from them (``set_const``) only where a field of :data:`SET_CONST_INPUTS` changed: recomputing them from unchanged
     masses is wasted work in MuJoCo, and in Warp (float32) it would change their last bits, so that a restored copy
     would not step identically."""
-    changed = {name for name, values in fields.items() if not np.array_equal(backend.per_env_field(name), values)}
+    changed = {
+        name for name, values in fields.items() if not np.array_equal(to_numpy(backend.per_env_field(name)), values)
+    }
     for name in changed:
-        backend.per_env_field(name)[:] = fields[name]
+        live = backend.per_env_field(name)
+        live[:] = like(fields[name], live, live.dtype)
     if SET_CONST_INPUTS & changed:
         backend.set_const()
 

@@ -7,14 +7,20 @@ stated where the core or a user meets it):
 * **float32.** Warp computes in single precision; the live arrays are float32 (``mujoco.batch``: float64). One
   decimated step from the same state agrees with MuJoCo to ~1e-5 on flat ground; on the rough heightfield the
   contact sets can differ, and so can the trajectories (the tests state each tolerance and its reason).
-* **Where the arrays live.** The live arrays are numpy views of the Warp arrays, shared with the kernels, which
-  exist on Warp's CPU device only: on a GPU they would be copies, and every write of the core would be lost. The
-  core of this package is written in numpy, so it runs this backend on Warp's CPU device (tests, debugging,
-  parity); ``physics_device="cuda:0"`` raises until the core runs on the physics' device.
+* **Where the arrays live.** The live arrays are torch tensors over the Warp arrays (``wp.to_torch``: the same
+  memory, no copy), on the backend's device: CPU tensors on Warp's CPU device, CUDA tensors on a GPU. The core
+  computes in the namespace of these arrays (:mod:`margin_rl.arrays`), so on a GPU the whole step stays there.
+* **CUDA graphs on a GPU.** There the decimated step (``nstep`` physics steps and the forward pass) is captured
+  once per ``nstep`` as a CUDA graph and replayed (eager launching is an order of magnitude slower): the
+  graph keeps the arrays it was captured with, and this backend never replaces one (per-world fields and resets
+  write in place). Warp runs on torch's current stream, so the core's torch operations and the kernels are
+  ordered. On the CPU device every call launches eagerly (graphs are CUDA-only).
 * **Buffers of a stated size.** Warp allocates its contact and constraint buffers once (MuJoCo grows its arena).
   :func:`contact_budget` sizes them from the model; a step that needs more sets ``Data.overflow``, which this
-  backend keeps across resets and :meth:`WarpPhysics.check_overflow` turns into :class:`PhysicsOverflowError`,
-  naming the setting to raise (``nconmax`` / ``njmax``).
+  backend ORs into a flag of its own on the device after every step (kept across resets, which clear
+  ``Data.overflow``; no host round-trip) and :meth:`WarpPhysics.check_overflow` turns into
+  :class:`PhysicsOverflowError`, naming the setting to raise (``nconmax`` / ``njmax``). The core checks it every
+  step on the CPU device and once per :data:`~margin_rl.envs.core.DEVICE_CHECK_STEPS` steps on a GPU.
 * **Divergence.** Warp neither raises nor resets a simulation whose accelerations blow up: its state turns
   non-finite and stays so, which the core's divergence check (non-finite or too fast) catches; :meth:`step`
   never reports failed ids of its own.
@@ -31,6 +37,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+import torch
 
 try:
     import mujoco_warp as mjw
@@ -41,6 +48,7 @@ except ImportError as exc:  # the optional dependency of the GPU path
         "and warp-lang, pinned together with mujoco), or use physics='mujoco'"
     ) from exc
 
+from margin_rl.arrays import to_numpy
 from margin_rl.envs.physics import ModelConstants, render_data, restore_per_env_fields
 
 # No start-up banner and no line per kernel module loaded or compiled (hundreds for ANYmal); warnings stay.
@@ -107,10 +115,8 @@ def _round_up(value: int, multiple: int) -> int:
 
 
 def check_warp_device(device: str | None) -> str:
-    """The Warp device this backend runs on: ``device`` checked, or the first GPU; ValueError otherwise.
-
-    The numpy core shares the Warp arrays with numpy, which only Warp's CPU device allows (module docstring).
-    """
+    """The Warp device this backend runs on: ``device`` checked (a name of ``warp.get_devices()``: ``"cpu"``,
+    ``"cuda:0"``, ...), or the first GPU where None; ValueError otherwise."""
     available = [str(d) for d in wp.get_devices()]
     if device is None:
         gpus = [d for d in available if d.startswith("cuda")]
@@ -122,12 +128,9 @@ def check_warp_device(device: str | None) -> str:
             )
         device = gpus[0]
     if not isinstance(device, str) or device not in available:
-        raise ValueError(f"physics_device must be one of Warp's devices {available}, got {device!r}")
-    if device != "cpu":
         raise ValueError(
-            f"physics_device={device!r}: the environment core computes in numpy on the host, which shares Warp's "
-            "arrays only on its CPU device; on a GPU every write would go to a copy. Use physics_device='cpu' "
-            "(Warp on the CPU, for tests and parity) or physics='mujoco' (mujoco.batch, the fast CPU path)"
+            f"physics_device must be one of Warp's devices here {available}, got {device!r}"
+            + ("" if any(d.startswith("cuda") for d in available) else " (Warp finds no GPU on this machine)")
         )
     return device
 
@@ -161,17 +164,26 @@ class WarpPhysics(ModelConstants):
             )
             self._keyframe_of_world = wp.full(num_envs, -1, dtype=int)
             self._state_rows = wp.zeros((num_envs, mujoco.mj_stateSize(model, INTEGRATION_STATE)), dtype=float)
-        data = self._data
-        self.qpos, self.qvel, self.time = data.qpos.numpy(), data.qvel.numpy(), data.time.numpy()
-        self.ctrl, self.xfrc_applied = data.ctrl.numpy(), data.xfrc_applied.numpy()
-        self.sensordata, self.site_xpos, self.xpos = data.sensordata.numpy(), data.site_xpos.numpy(), data.xpos.numpy()
-        self.actuator_force = data.actuator_force.numpy()
-        self._overflow = data.overflow.numpy()
-        self._overflow_seen = np.zeros(num_envs, dtype=np.int64)  # kept across resets (which clear Data.overflow)
-        self._per_env_fields = {name: getattr(self._model, name).numpy() for name in PER_ENV_FIELDS}
+        self._graphs: dict[int, Any] = {}  # nstep -> the captured CUDA graph of one decimated step
+        data, view = self._data, wp.to_torch
+        self.qpos, self.qvel, self.time = view(data.qpos), view(data.qvel), view(data.time)
+        self.ctrl, self.xfrc_applied = view(data.ctrl), view(data.xfrc_applied)
+        self.sensordata, self.site_xpos, self.xpos = view(data.sensordata), view(data.site_xpos), view(data.xpos)
+        self.actuator_force = view(data.actuator_force)
+        self._overflow = view(data.overflow)
+        self._overflow_seen = torch.zeros_like(self._overflow)  # on the device, kept across resets (which clear it)
+        self._keyframes = view(self._keyframe_of_world)
+        self._per_env_fields = {name: view(getattr(self._model, name)) for name in PER_ENV_FIELDS}
+
+    def _on_device(self) -> Any:
+        """The scope of every launch: Warp's device; on a GPU, torch's current stream there (ordered with the core's
+        torch operations)."""
+        if self.device == "cpu":
+            return wp.ScopedDevice(self.device)
+        return wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(self.device)))
 
     # ------------------------------------------------------------------ per-environment model fields
-    def per_env_field(self, name: str) -> np.ndarray:
+    def per_env_field(self, name: str) -> torch.Tensor:
         """The live ``(num_envs, ...)`` per-world values of model field ``name`` (one of :data:`PER_ENV_FIELDS`);
         after writing a field of :data:`~margin_rl.envs.physics.SET_CONST_INPUTS`, call :meth:`set_const`."""
         if name not in self._per_env_fields:
@@ -183,7 +195,7 @@ class WarpPhysics(ModelConstants):
 
     def set_const(self) -> None:
         """Recompute the constants derived from the per-world model fields (``mujoco_warp.set_const``)."""
-        with wp.ScopedDevice(self.device):
+        with self._on_device():
             mjw.set_const(self._model, self._data)
 
     # ------------------------------------------------------------------ operations
@@ -191,36 +203,46 @@ class WarpPhysics(ModelConstants):
         """Reset worlds ``ids`` to ``keyframe`` (state, controls, applied forces, warm start, clock), computing
         nothing (the caller writes the state, then calls :meth:`forward`)."""
         self._collect_overflow()
-        keys = np.full(self.num_envs, -1, dtype=np.int32)
-        keys[np.asarray(ids, dtype=np.int64)] = keyframe
-        self._keyframe_of_world.numpy()[:] = keys
-        with wp.ScopedDevice(self.device):
+        self._keyframes.fill_(-1)
+        self._keyframes[torch.as_tensor(ids, dtype=torch.int64, device=self._keyframes.device)] = keyframe
+        with self._on_device():
             mjw.reset_data_keyframe(self._model, self._data, self._keyframe_of_world)
 
     def forward(self, ids: np.ndarray | None = None) -> None:
         """Compute every derived quantity of the worlds. Warp's forward pass has no world mask: it runs on all
         of them, which leaves the others' outputs as they were (a forward pass is a function of the state)."""
-        with wp.ScopedDevice(self.device):
+        with self._on_device():
             mjw.forward(self._model, self._data)
 
-    def step(self, nstep: int) -> np.ndarray:
+    def step(self, nstep: int) -> Any:
         """Advance every world by ``nstep`` physics steps, then compute the derived quantities of the new state
-        (as ``mujoco.batch`` with ``stage=mjSTAGE_ACC``). Returns no ids: Warp reports no failed simulation (see the
-        module docstring)."""
-        with wp.ScopedDevice(self.device):
-            for _ in range(nstep):
-                mjw.step(self._model, self._data)
-            mjw.forward(self._model, self._data)
-        return np.zeros(0, dtype=np.int64)
+        (as ``mujoco.batch`` with ``stage=mjSTAGE_ACC``); a CUDA graph on a GPU (module docstring). Returns no ids
+        (an empty tensor): Warp reports no failed simulation (see the module docstring)."""
+        with self._on_device():
+            if self.device == "cpu":
+                self._launch_step(nstep)
+            else:
+                if nstep not in self._graphs:
+                    with wp.ScopedCapture() as capture:
+                        self._launch_step(nstep)
+                    self._graphs[nstep] = capture.graph
+                wp.capture_launch(self._graphs[nstep])
+        self._collect_overflow()
+        return torch.zeros(0, dtype=torch.int64, device=self.qpos.device)
+
+    def _launch_step(self, nstep: int) -> None:
+        for _ in range(nstep):
+            mjw.step(self._model, self._data)
+        mjw.forward(self._model, self._data)
 
     def check_overflow(self) -> None:
         """:class:`PhysicsOverflowError` if any world's contact or constraint buffer overflowed since the backend
         was built (dropped contacts make every later step of that world wrong), naming the setting to raise."""
-        self._collect_overflow()
-        worlds = np.flatnonzero(self._overflow_seen & BUFFER_OVERFLOWS)
+        seen = self._overflow_seen.cpu().numpy()  # the one host read: where the core chooses to check
+        worlds = np.flatnonzero(seen & BUFFER_OVERFLOWS)
         if worlds.size == 0:
             return
-        kinds = mjw.OverflowType(int(np.bitwise_or.reduce(self._overflow_seen[worlds])) & BUFFER_OVERFLOWS)
+        kinds = mjw.OverflowType(int(np.bitwise_or.reduce(seen[worlds])) & BUFFER_OVERFLOWS)
         raise PhysicsOverflowError(
             f"MuJoCo Warp dropped contacts or constraint rows ({kinds!r}) in {worlds.size} of {self.num_envs} worlds "
             f"(first: {worlds[:5].tolist()}); the buffers hold nconmax={self.nconmax} contacts and njmax={self.njmax} "
@@ -228,21 +250,21 @@ class WarpPhysics(ModelConstants):
         )
 
     def _collect_overflow(self) -> None:
-        self._overflow_seen |= self._overflow
+        self._overflow_seen.bitwise_or_(self._overflow)
 
     def render_data(self, env: int) -> mujoco.MjData:
         """An MjData with world ``env``'s positions and velocities, forwarded by MuJoCo (for rendering)."""
-        return render_data(self.model, self.qpos[env], self.qvel[env])
+        return render_data(self.model, to_numpy(self.qpos[env]), to_numpy(self.qvel[env]))
 
     # ------------------------------------------------------------------ state
     def get_state(self) -> dict[str, Any]:
         """A copy of the integration state rows (:data:`INTEGRATION_STATE`, float32) and the per-world model
         fields: what a restored backend needs to step on identically."""
-        with wp.ScopedDevice(self.device):
+        with self._on_device():
             mjw.get_state(self._model, self._data, self._state_rows, INTEGRATION_STATE)
         return {
-            "state": self._state_rows.numpy().copy(),
-            "per_env_fields": {name: values.copy() for name, values in self._per_env_fields.items()},
+            "state": wp.to_torch(self._state_rows).cpu().numpy().copy(),
+            "per_env_fields": {name: values.cpu().numpy().copy() for name, values in self._per_env_fields.items()},
         }
 
     def set_state(self, state: dict[str, Any]) -> None:
@@ -255,8 +277,9 @@ class WarpPhysics(ModelConstants):
                 "restore it into a backend of the same model and number of environments"
             )
         restore_per_env_fields(self, state["per_env_fields"])
-        self._state_rows.numpy()[:] = rows
-        with wp.ScopedDevice(self.device):
+        rows_live = wp.to_torch(self._state_rows)
+        rows_live.copy_(torch.as_tensor(rows, dtype=rows_live.dtype))
+        with self._on_device():
             mjw.set_state(self._model, self._data, self._state_rows, INTEGRATION_STATE)
         self.forward()
 

@@ -9,12 +9,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from margin_rl.arrays import namespace, to_numpy
 from margin_rl.envs.config import EnvConfig
 
 
 @dataclass(frozen=True)
 class SimulationState:
-    """World-frame state of some environments, read from the batch's arrays (N leading)."""
+    """World-frame state of some environments, read from the batch's arrays (N leading; numpy arrays, or torch
+    tensors on the physics' device: the types below name the host's kind)."""
 
     base_pos: np.ndarray  # (N, 3) [m]
     base_rot: np.ndarray  # (N, 3, 3) R_WB
@@ -33,11 +35,12 @@ class SimulationState:
 
     def finite(self) -> SimulationState:
         """The same state with every non-finite float replaced by 0 (a diverged step's bookkeeping)."""
+        xp = namespace(self.base_pos)
         changes = {}
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            if value.dtype.kind == "f":
-                changes[f.name] = np.where(np.isfinite(value), value, 0.0)
+            if xp.isdtype(value.dtype, "real floating"):
+                changes[f.name] = xp.where(xp.isfinite(value), value, 0.0)
         return dataclasses.replace(self, **changes)
 
 
@@ -69,6 +72,21 @@ class StepOutput:
     final_observation: np.ndarray  # (N, obs): the observation before autoreset (valid where done)
     privileged: np.ndarray | None  # (N, priv) critic observation, after autoreset
 
+    def to_numpy(self) -> StepOutput:
+        """This output with every array on the host as numpy (itself where it is already: the Gymnasium and SB3
+        edges of a core that computes on a device)."""
+        if namespace(self.reward) is np:
+            return self
+        return StepOutput(
+            to_numpy(self.observation),
+            to_numpy(self.reward),
+            to_numpy(self.terminated),
+            to_numpy(self.truncated),
+            {key: to_numpy(value) for key, value in self.info.items()},
+            to_numpy(self.final_observation),
+            None if self.privileged is None else to_numpy(self.privileged),
+        )
+
 
 def check_finite_outputs(config: EnvConfig, reward: np.ndarray | float, *observations: np.ndarray) -> None:
     """FloatingPointError if a reward or an observation is NaN or inf.
@@ -77,8 +95,9 @@ def check_finite_outputs(config: EnvConfig, reward: np.ndarray | float, *observa
     setting so large that float arithmetic overflows, which no agent should train on. Checked in the core, so
     every adapter (Gymnasium, SB3, rsl-rl) gets the same error.
     """
-    bad_observation = not all(np.all(np.isfinite(o)) for o in observations)
-    if not bad_observation and np.all(np.isfinite(reward)):
+    xp = namespace(*observations)
+    bad_observation = not all(bool(xp.all(xp.isfinite(o))) for o in observations)
+    if not bad_observation and bool(xp.all(xp.isfinite(xp.asarray(reward)))):
         return
     rnd = config.randomization
     raise FloatingPointError(

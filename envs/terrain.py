@@ -16,9 +16,13 @@ Grid convention (MuJoCo's): ``heights[r, c]`` is the elevation at x = x0 + c * r
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from array_api_compat import device as device_of
+
+from margin_rl.arrays import like, namespace
 
 TILE_TYPES: tuple[str, ...] = (
     "flat",
@@ -58,28 +62,57 @@ class TerrainConfig:
 
 @dataclass(frozen=True)
 class Terrain:
-    """A height grid with vectorised height/normal queries; ``flat`` terrains are the plane z = 0."""
+    """A height grid with vectorised height/normal queries; ``flat`` terrains are the plane z = 0.
+
+    The queries take numpy arrays or torch tensors (:mod:`margin_rl.arrays`) and answer in the same kind, on the
+    same device: the grid and the spawn points are copied to a device once, on its first query there.
+    """
 
     heights: np.ndarray | None  # (n, n) [m], None for flat ground
     origin: tuple[float, float]  # (x0, y0) of heights[0, 0]
     resolution: float
     spawn_points: np.ndarray  # (k, 3) flat places to put a robot: x, y, ground height
+    _on_device: dict[Any, tuple[Any, Any]] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_on_device"] = {}  # device copies are rebuilt where they are used
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.__dict__.setdefault("_on_device", {})
 
     @property
     def is_flat(self) -> bool:
         return self.heights is None
 
-    def height(self, xy: np.ndarray) -> np.ndarray:
+    def _arrays_like(self, reference: Any) -> tuple[Any, Any]:
+        """(heights, spawn points) as arrays of ``reference``'s kind and device (numpy: the fields themselves)."""
+        if namespace(reference) is np:
+            return self.heights, self.spawn_points
+        key = str(reference.device)
+        if key not in self._on_device:
+            heights = None if self.heights is None else like(self.heights, reference)
+            self._on_device[key] = (heights, like(self.spawn_points, reference))
+        return self._on_device[key]
+
+    def spawn_points_like(self, reference: Any) -> Any:
+        """:attr:`spawn_points` (k, 3) as an array of ``reference``'s kind and device."""
+        return self._arrays_like(reference)[1]
+
+    def height(self, xy: Any) -> Any:
         """Ground height [m] under points (..., 2), bilinear in the grid (0 for flat ground)."""
-        xy = np.asarray(xy, dtype=float)
+        xp = namespace(xy)
+        xy = xp.astype(xp.asarray(xy), xp.float64, copy=False)
         if self.heights is None:
-            return np.zeros(xy.shape[:-1])
+            return xp.zeros(xy.shape[:-1], dtype=xp.float64, device=device_of(xy))
+        h, _ = self._arrays_like(xy)
         n = self.heights.shape[0]
-        u = np.clip((xy[..., 0] - self.origin[0]) / self.resolution, 0, n - 1.000001)
-        v = np.clip((xy[..., 1] - self.origin[1]) / self.resolution, 0, n - 1.000001)
-        c0, r0 = np.floor(u).astype(int), np.floor(v).astype(int)
+        u = xp.clip((xy[..., 0] - self.origin[0]) / self.resolution, 0, n - 1.000001)
+        v = xp.clip((xy[..., 1] - self.origin[1]) / self.resolution, 0, n - 1.000001)
+        c0, r0 = xp.astype(xp.floor(u), xp.int64), xp.astype(xp.floor(v), xp.int64)
         fu, fv = u - c0, v - r0
-        h = self.heights
         return (
             h[r0, c0] * (1 - fu) * (1 - fv)
             + h[r0, c0 + 1] * fu * (1 - fv)
@@ -87,17 +120,20 @@ class Terrain:
             + h[r0 + 1, c0 + 1] * fu * fv
         )
 
-    def normal(self, xy: np.ndarray) -> np.ndarray:
+    def normal(self, xy: Any) -> Any:
         """Unit terrain normals (..., 3) under points (..., 2), from central differences of the height."""
-        xy = np.asarray(xy, dtype=float)
+        xp = namespace(xy)
+        xy = xp.astype(xp.asarray(xy), xp.float64, copy=False)
         if self.heights is None:
-            return np.broadcast_to(np.array([0.0, 0.0, 1.0]), (*xy.shape[:-1], 3)).copy()
+            up = xp.asarray([0.0, 0.0, 1.0], dtype=xp.float64, device=device_of(xy))
+            return xp.asarray(xp.broadcast_to(up, (*xy.shape[:-1], 3)), copy=True)
         d = self.resolution
-        ex, ey = np.array([d, 0.0]), np.array([0.0, d])
+        ex = xp.asarray([d, 0.0], dtype=xp.float64, device=device_of(xy))
+        ey = xp.asarray([0.0, d], dtype=xp.float64, device=device_of(xy))
         dx = (self.height(xy + ex) - self.height(xy - ex)) / (2 * d)
         dy = (self.height(xy + ey) - self.height(xy - ey)) / (2 * d)
-        n = np.stack([-dx, -dy, np.ones_like(dx)], axis=-1)
-        return n / np.linalg.norm(n, axis=-1, keepdims=True)
+        n = xp.stack([-dx, -dy, xp.ones_like(dx)], axis=-1)
+        return n / xp.linalg.vector_norm(n, axis=-1, keepdims=True)
 
 
 def flat_terrain() -> Terrain:

@@ -55,6 +55,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from margin_rl.arrays import like, to_numpy
 from margin_rl.envs.anymal import (
     ACTION_SIZE,
     FrameRenderer,
@@ -201,7 +202,7 @@ class AnymalVectorEnv(VectorEnv):
         check_reset_options(options, type(self).__name__)
         super().reset(seed=seed)
         self.core.reset(seed=seed)
-        observations = self.core.observe_all()
+        observations = to_numpy(self.core.observe_all())
         self._needs_reset = False
         self._autoreset_envs[:] = False
         return observations, {}
@@ -214,7 +215,7 @@ class AnymalVectorEnv(VectorEnv):
             (self.num_envs, ACTION_SIZE),
             f"pass one row of 12 numbers per environment (num_envs={self.num_envs})",
         )
-        out = self.core.step(actions)
+        out = self.core.step(actions).to_numpy()
         if self.autoreset_mode == AutoresetMode.NEXT_STEP:
             return self._next_step_autoreset(out.observation, out.reward, out.terminated, out.truncated, out.info)
         infos: dict[str, Any] = {}
@@ -246,7 +247,7 @@ class AnymalVectorEnv(VectorEnv):
         if resetting.any():
             ids = np.flatnonzero(resetting)
             self.core.reset(ids)
-            observation[ids] = self.core.observe(ids)
+            observation[ids] = to_numpy(self.core.observe(ids))
             reward[ids], terminated[ids], truncated[ids] = 0.0, False, False
             info = {k: np.where(active.reshape(-1, *([1] * (v.ndim - 1))), v, 0) for k, v in info.items()}
         infos: dict[str, Any] = {}
@@ -270,7 +271,7 @@ class AnymalVectorEnv(VectorEnv):
             AttributeError: no such attribute (the message lists the per-environment ones and the config fields).
         """
         if name in PER_ENV_ATTRIBUTES:
-            values = PER_ENV_ATTRIBUTES[name](self.core)
+            values = to_numpy(PER_ENV_ATTRIBUTES[name](self.core))
             return tuple(values[i].item() if values.ndim == 1 else values[i].copy() for i in range(self.num_envs))
         if name in CONFIG_FIELDS:
             return (getattr(self.config, name),) * self.num_envs
@@ -304,7 +305,7 @@ class AnymalVectorEnv(VectorEnv):
                 f"Got `{len(values)}` values for {self.num_envs} environments (set_attr({name!r}, ...))."
             )
         if name == "command":
-            self.core.command[:] = _commands(values)
+            self.core.command[:] = like(_commands(values), self.core.command)
             return
         if name in CONFIG_FIELDS:
             first = values[0]

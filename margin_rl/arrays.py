@@ -25,3 +25,102 @@ def namespace(*values: Any) -> Any:
     if all(isinstance(v, _HOST_VALUES) for v in values):
         return np
     return array_namespace(*(v for v in values if is_array_api_obj(v)))
+
+
+def to_numpy(value: Any) -> np.ndarray:
+    """``value`` as a numpy array: numpy arrays and Python values as they are (no copy), a tensor copied to the host
+    (the Gymnasium and SB3 edges of a core that computes on a device)."""
+    if isinstance(value, _HOST_VALUES):
+        return np.asarray(value)
+    return np.asarray(value.detach().cpu().numpy()) if hasattr(value, "detach") else np.asarray(value)
+
+
+def like(value: Any, reference: Any, dtype: Any = None) -> Any:
+    """``value`` (numpy, Python or a tensor) as an array of ``reference``'s kind and device, in ``dtype`` (default:
+    ``value``'s own); no copy where it already is one (numpy stays numpy, bit for bit)."""
+    xp = namespace(reference)
+    if xp is np:
+        return np.asarray(to_numpy(value), dtype=dtype)
+    import torch  # a tensor reference: torch is loaded already
+
+    if isinstance(value, np.ndarray) and not value.flags.writeable:
+        value = value.copy()  # torch shares a numpy array's memory and would write through a read-only view
+    return torch.as_tensor(value, dtype=dtype, device=reference.device)
+
+
+class TorchRandom:
+    """The draws the environments make, from a ``torch.Generator`` on a device, under numpy ``Generator``'s names and
+    arguments (``uniform``, ``integers``, ``exponential``), so that one piece of code draws on either: the host's
+    numpy generator beside ``mujoco.batch``, this beside a physics on a device. float64 draws, int64 integers.
+    Pickles (and deep-copies) with its state."""
+
+    def __init__(self, seed: int | None, device: Any) -> None:
+        import torch
+
+        self.device = torch.device(device)
+        self.generator = torch.Generator(device=self.device)
+        if seed is None:
+            self.generator.seed()
+        else:
+            self.generator.manual_seed(int(seed))
+
+    def _shape(self, size: Any) -> tuple[int, ...]:
+        return (int(size),) if isinstance(size, (int, np.integer)) else tuple(int(s) for s in size)
+
+    def uniform(self, low: float = 0.0, high: float = 1.0, size: Any = 1) -> Any:
+        """U[low, high) of shape ``size`` (scalar bounds)."""
+        import torch
+
+        draws = torch.rand(self._shape(size), generator=self.generator, dtype=torch.float64, device=self.device)
+        return low + (high - low) * draws
+
+    def integers(self, low: int, high: int, size: Any = 1) -> Any:
+        """Integers in [low, high) of shape ``size``."""
+        import torch
+
+        shape = self._shape(size)
+        return torch.randint(int(low), int(high), shape, generator=self.generator, device=self.device)
+
+    def exponential(self, scale: float = 1.0, size: Any = 1) -> Any:
+        """Exponential draws of mean ``scale`` (> 0) of shape ``size``."""
+        import torch
+
+        draws = torch.empty(self._shape(size), dtype=torch.float64, device=self.device)
+        return draws.exponential_(1.0 / scale, generator=self.generator)
+
+    @property
+    def state(self) -> Any:
+        """The generator's state (a CPU byte tensor), for checkpoints: assign it back to restore the draws."""
+        return self.generator.get_state()
+
+    @state.setter
+    def state(self, value: Any) -> None:
+        self.generator.set_state(value)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"device": str(self.device), "state": self.state}
+
+    def __setstate__(self, saved: dict[str, Any]) -> None:
+        self.__init__(0, saved["device"])
+        self.state = saved["state"]
+
+
+def random_generator(seed: int | None, reference: Any) -> Any:
+    """The environments' random generator for arrays of ``reference``'s kind: ``numpy.random.default_rng(seed)`` for
+    numpy (the host's draws, unchanged), :class:`TorchRandom` on a tensor's device."""
+    if namespace(reference) is np:
+        return np.random.default_rng(seed)
+    return TorchRandom(seed, reference.device)
+
+
+def generator_state(rng: Any) -> Any:
+    """The state of a generator of :func:`random_generator` (numpy's bit-generator dict, or the torch state)."""
+    return rng.bit_generator.state if isinstance(rng, np.random.Generator) else rng.state
+
+
+def set_generator_state(rng: Any, state: Any) -> None:
+    """Restore a :func:`generator_state` into a generator of the same kind."""
+    if isinstance(rng, np.random.Generator):
+        rng.bit_generator.state = state
+    else:
+        rng.state = state

@@ -2,11 +2,23 @@
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from margin_rl.arrays import namespace
+from margin_rl.arrays import (
+    TorchRandom,
+    generator_state,
+    like,
+    namespace,
+    random_generator,
+    set_generator_state,
+    to_numpy,
+)
 
 
 def test_numpy_inputs_and_python_values_get_numpy_itself() -> None:
@@ -24,3 +36,48 @@ def test_torch_tensors_get_the_torch_namespace_on_their_device() -> None:
 def test_mixed_kinds_are_refused() -> None:
     with pytest.raises(TypeError, match="Multiple namespaces"):
         namespace(np.zeros(2), torch.zeros(2))
+
+
+def test_to_numpy_and_like_move_between_kinds_without_copying_numpy() -> None:
+    host = np.arange(6.0).reshape(2, 3)
+    assert to_numpy(host) is host  # numpy passes through
+    tensor = like(host, torch.zeros(1))
+    assert isinstance(tensor, torch.Tensor) and tensor.dtype == torch.float64
+    np.testing.assert_array_equal(to_numpy(tensor), host)
+    assert like(host, np.zeros(1)) is host
+    read_only = np.arange(3.0)
+    read_only.flags.writeable = False
+    copied = like(read_only, torch.zeros(1))
+    copied += 1  # a copy: the read-only array is untouched
+    np.testing.assert_array_equal(read_only, [0.0, 1.0, 2.0])
+    assert like(tensor, torch.zeros(1)) is tensor  # already of the kind: no copy
+
+
+def test_random_generator_draws_on_the_reference_kind() -> None:
+    assert isinstance(random_generator(3, np.zeros(1)), np.random.Generator)
+    rng = random_generator(3, torch.zeros(1))
+    assert isinstance(rng, TorchRandom)
+    u = rng.uniform(-2.0, 3.0, size=(400, 3))
+    assert u.dtype == torch.float64 and u.shape == (400, 3) and float(u.min()) >= -2.0 and float(u.max()) < 3.0
+    k = rng.integers(0, 5, size=400)
+    assert k.dtype == torch.int64 and set(k.tolist()) == {0, 1, 2, 3, 4}
+    e = rng.exponential(2.0, size=20000)
+    assert float(e.min()) >= 0.0 and abs(float(e.mean()) - 2.0) < 0.1  # mean 2, standard error 0.014
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_torch_draws_are_reproducible_and_survive_pickling_and_checkpoints(seed: int) -> None:
+    a, b = TorchRandom(seed, "cpu"), TorchRandom(seed, "cpu")
+    assert torch.equal(a.uniform(0, 1, 5), b.uniform(0, 1, 5))
+    copied = pickle.loads(pickle.dumps(a))
+    assert torch.equal(a.exponential(1.0, 4), copied.exponential(1.0, 4))
+    saved = generator_state(a)
+    first = a.integers(0, 100, 8)
+    set_generator_state(a, saved)
+    assert torch.equal(a.integers(0, 100, 8), first)
+    host = np.random.default_rng(seed)
+    saved = generator_state(host)
+    first_host = host.uniform(size=3)
+    set_generator_state(host, saved)
+    np.testing.assert_array_equal(host.uniform(size=3), first_host)

@@ -40,7 +40,9 @@ from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from array_api_compat import device as device_of
 
+from margin_rl.arrays import like, namespace, to_numpy
 from margin_rl.envs.terminations import CAUSE_NAMES, info_key
 
 AXES: tuple[str, ...] = ("x", "y", "z")
@@ -64,33 +66,48 @@ def reward_terms(info: Mapping[str, np.ndarray]) -> tuple[str, ...]:
 
 
 class EpisodeStatistics:
-    """Running per-environment episode sums; :meth:`update` returns the metrics of the episodes that ended."""
+    """Running per-environment episode sums; :meth:`update` returns the metrics of the episodes that ended.
 
-    def __init__(self, num_envs: int, dt: float, warmup_steps: int = 0) -> None:
+    The sums live where the environment's arrays do (``like``: an array of the core, e.g. ``core.episode_step``:
+    numpy on the host, torch tensors on the physics' device), so that a step adds to them without leaving the
+    device; the metrics of finished episodes come back as numpy.
+    """
+
+    def __init__(self, num_envs: int, dt: float, warmup_steps: int = 0, like: Any = None) -> None:
         """``dt``: policy step [s]; ``warmup_steps``: steps at the start of each episode left out of the
-        acceleration statistics."""
+        acceleration statistics; ``like``: an array of the kind and device the step outputs come in (None: numpy)."""
         self.num_envs, self.dt, self.warmup_steps = num_envs, float(dt), int(warmup_steps)
         self.terms: tuple[str, ...] = ()
+        xp = self._xp = namespace(np.zeros(0) if like is None else like)
+        self._device = "cpu" if like is None else device_of(like)
         n = num_envs
-        self._return = np.zeros(n)
-        self._length = np.zeros(n, dtype=np.int64)
-        self._terms = np.zeros((n, 0))
-        self._margin_sum = np.zeros(n)
-        self._margin_min = np.full(n, np.inf)
-        self._margin_negative = np.zeros(n)
-        self._acc_count = np.zeros(n)
-        self._lin_sq = np.zeros((n, 3))
-        self._lin_peak = np.zeros((n, 3))
-        self._ang_sq = np.zeros((n, 3))
-        self._ang_peak = np.zeros((n, 3))
-        self._vel_err = np.zeros(n)
-        self._fwd_vel = np.zeros(n)
-        self._stance = np.zeros(n)
-        self._base_height = np.zeros(n)
+        self._return = self._zeros(n)
+        self._length = self._zeros(n, dtype=xp.int64)
+        self._terms = self._zeros(n, 0)
+        self._margin_sum = self._zeros(n)
+        self._margin_min = xp.full(n, xp.inf, dtype=xp.float64, device=self._device)
+        self._margin_negative = self._zeros(n)
+        self._acc_count = self._zeros(n)
+        self._lin_sq = self._zeros(n, 3)
+        self._lin_peak = self._zeros(n, 3)
+        self._ang_sq = self._zeros(n, 3)
+        self._ang_peak = self._zeros(n, 3)
+        self._vel_err = self._zeros(n)
+        self._fwd_vel = self._zeros(n)
+        self._stance = self._zeros(n)
+        self._base_height = self._zeros(n)
 
-    def reset(self, ids: np.ndarray | None = None) -> None:
+    def _zeros(self, *shape: int, dtype: Any = None) -> Any:
+        xp = self._xp
+        return xp.zeros(shape, dtype=xp.float64 if dtype is None else dtype, device=self._device)
+
+    def _float(self, value: Any) -> Any:
+        xp = self._xp
+        return xp.astype(xp.asarray(value), xp.float64, copy=False)
+
+    def reset(self, ids: Any = None) -> None:
         """Start new episodes in environments ``ids`` (all if None)."""
-        ids = slice(None) if ids is None else ids
+        ids = slice(None) if ids is None else like(ids, self._return)
         for array in (
             self._return,
             self._length,
@@ -108,7 +125,7 @@ class EpisodeStatistics:
             self._base_height,
         ):
             array[ids] = 0
-        self._margin_min[ids] = np.inf
+        self._margin_min[ids] = math.inf
 
     def update(
         self,
@@ -119,79 +136,84 @@ class EpisodeStatistics:
     ) -> dict[str, np.ndarray]:
         """Add one step of every environment; returns the metrics (arrays over the finished episodes, in
         environment order, plus ``"env"``: their indices) and starts new episodes there. Empty when none ended."""
+        xp, f = self._xp, self._float
         if not self.terms:
             self.terms = reward_terms(info)
-            self._terms = np.zeros((self.num_envs, len(self.terms)))
+            self._terms = self._zeros(self.num_envs, len(self.terms))
         self._return += reward
         self._length += 1
         if self.terms:
-            self._terms += np.column_stack([info[f"reward_{t}"] for t in self.terms])
-        margin = np.asarray(info["margin"], dtype=float)
+            self._terms += xp.stack([info[f"reward_{t}"] for t in self.terms], axis=1)
+        margin = f(info["margin"])
         self._margin_sum += margin
-        self._margin_min = np.minimum(self._margin_min, margin)
+        self._margin_min = xp.minimum(self._margin_min, margin)
         self._margin_negative += margin < 0
         counted = (self._length > self.warmup_steps)[:, None]
-        lin, ang = np.asarray(info["base_lin_acc"]), np.asarray(info["base_ang_acc"])
+        lin, ang = xp.asarray(info["base_lin_acc"]), xp.asarray(info["base_ang_acc"])
         self._acc_count += counted[:, 0]
         self._lin_sq += counted * lin**2
         self._ang_sq += counted * ang**2
-        self._lin_peak = np.where(counted, np.maximum(self._lin_peak, np.abs(lin)), self._lin_peak)
-        self._ang_peak = np.where(counted, np.maximum(self._ang_peak, np.abs(ang)), self._ang_peak)
+        self._lin_peak = xp.where(counted, xp.maximum(self._lin_peak, xp.abs(lin)), self._lin_peak)
+        self._ang_peak = xp.where(counted, xp.maximum(self._ang_peak, xp.abs(ang)), self._ang_peak)
         self._vel_err += info["velocity_error"]
-        self._fwd_vel += np.asarray(info["base_lin_vel"])[:, 0]
+        self._fwd_vel += xp.asarray(info["base_lin_vel"])[:, 0]
         self._stance += info["stance_width"]
         self._base_height += info["base_height"]
-        done = np.asarray(terminated, dtype=bool) | np.asarray(truncated, dtype=bool)
-        if not done.any():
+        truncated = xp.astype(xp.asarray(truncated), xp.bool, copy=False)
+        done = xp.astype(xp.asarray(terminated), xp.bool, copy=False) | truncated
+        if not bool(xp.any(done)):
             return {}
-        ids = np.flatnonzero(done)
-        metrics = self._finish(ids, info, np.asarray(truncated, dtype=bool))
+        ids = xp.nonzero(done)[0]
+        metrics = self._finish(ids, info, truncated)
         self.reset(ids)
         return metrics
 
-    def close(self, ids: np.ndarray, info: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    def close(self, ids: Any, info: Mapping[str, Any]) -> dict[str, np.ndarray]:
         """End the running episodes of ``ids`` without another step (counted as time-outs); their metrics."""
-        ids = np.asarray(ids, dtype=np.int64)
-        if ids.size == 0:
+        ids = like(np.asarray(to_numpy(ids), dtype=np.int64), self._return)
+        if ids.shape[0] == 0:
             return {}
-        metrics = self._finish(ids, info, np.ones(self.num_envs, dtype=bool))
+        metrics = self._finish(ids, info, self._xp.ones(self.num_envs, dtype=self._xp.bool, device=self._device))
         self.reset(ids)
         return metrics
 
-    def _finish(self, ids: np.ndarray, info: Mapping[str, np.ndarray], truncated: np.ndarray) -> dict[str, np.ndarray]:
-        length = self._length[ids].astype(float)
+    def _finish(self, ids: Any, info: Mapping[str, Any], truncated: Any) -> dict[str, np.ndarray]:
+        """The metrics of the episodes of ``ids``, computed where the sums are and returned as numpy."""
+        xp, f = self._xp, self._float
+        copy = xp.asarray
+        length = xp.astype(self._length[ids], xp.float64)
         count = self._acc_count[ids]
         with np.errstate(invalid="ignore", divide="ignore"):
             lin_ms = self._lin_sq[ids] / count[:, None]
             ang_ms = self._ang_sq[ids] / count[:, None]
         no_acc = count == 0
-        metrics: dict[str, np.ndarray] = {
+        metrics: dict[str, Any] = {
             "env": ids,
-            "return": self._return[ids].copy(),
+            "return": copy(self._return[ids], copy=True),
             "length": length,
             "duration_s": length * self.dt,
         }
         for j, term in enumerate(self.terms):
-            metrics[f"reward/{term}"] = self._terms[ids, j].copy()
+            metrics[f"reward/{term}"] = copy(self._terms[ids, j], copy=True)
         metrics["margin_mean"] = self._margin_sum[ids] / length
-        metrics["margin_min"] = self._margin_min[ids].copy()
+        metrics["margin_min"] = copy(self._margin_min[ids], copy=True)
         metrics["margin_negative_fraction"] = self._margin_negative[ids] / length
         for name, ms, peak in (("lin_acc", lin_ms, self._lin_peak[ids]), ("ang_acc", ang_ms, self._ang_peak[ids])):
             for k, axis in enumerate(AXES):
-                metrics[f"{name}_rms_{axis}"] = np.sqrt(ms[:, k])
-                metrics[f"{name}_peak_{axis}"] = np.where(no_acc, np.nan, peak[:, k])
-            metrics[f"{name}_rms"] = np.sqrt(ms.sum(axis=1))
+                metrics[f"{name}_rms_{axis}"] = xp.sqrt(ms[:, k])
+                metrics[f"{name}_peak_{axis}"] = xp.where(no_acc, xp.nan, peak[:, k])
+            metrics[f"{name}_rms"] = xp.sqrt(xp.sum(ms, axis=1))
         metrics["velocity_error_mean"] = self._vel_err[ids] / length
         metrics["forward_velocity_mean"] = self._fwd_vel[ids] / length
         metrics["stance_width_mean"] = self._stance[ids] / length
         metrics["base_height_mean"] = self._base_height[ids] / length
-        metrics["fell"] = np.asarray(info["fell"], dtype=float)[ids]
-        metrics["diverged"] = np.asarray(info["diverged"], dtype=float)[ids]
+        metrics["fell"] = f(info["fell"])[ids]
+        metrics["diverged"] = f(info["diverged"])[ids]
         for cause in CAUSE_NAMES:
             if info_key(cause) in info:
-                metrics[f"termination/{cause}"] = np.asarray(info[info_key(cause)], dtype=float)[ids]
-        metrics["timed_out"] = truncated[ids].astype(float)
-        return metrics
+                metrics[f"termination/{cause}"] = f(info[info_key(cause)])[ids]
+        metrics["timed_out"] = xp.astype(truncated[ids], xp.float64)
+        return {key: to_numpy(value) for key, value in metrics.items()}
 
 
 def split_episodes(metrics: Mapping[str, np.ndarray]) -> list[dict[str, float]]:
@@ -223,16 +245,16 @@ def tensorboard_tags(metrics: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]
     return tags
 
 
-def step_tags(info: Mapping[str, np.ndarray]) -> dict[str, float]:
-    """Per-step statistics over the batch (logged every step, also before any episode ends)."""
-    margin = np.asarray(info["margin"], dtype=float)
-    lin = np.linalg.norm(np.asarray(info["base_lin_acc"]), axis=1)
-    return {
-        "Step/margin_mean": float(margin.mean()),
-        "Step/margin_min": float(margin.min()),
-        "Step/lin_acc_norm_mean": float(lin.mean()),
-        "Step/velocity_error_mean": float(np.mean(info["velocity_error"])),
-    }
+def step_tags(info: Mapping[str, Any]) -> dict[str, float]:
+    """Per-step statistics over the batch (logged every step, also before any episode ends), reduced where the info
+    arrays are (numpy or a device's tensors) and read back once."""
+    xp = namespace(info["margin"])
+    margin = xp.astype(xp.asarray(info["margin"]), xp.float64, copy=False)
+    lin = xp.linalg.vector_norm(xp.asarray(info["base_lin_acc"]), axis=1)
+    velocity_error = xp.mean(xp.asarray(info["velocity_error"]))
+    values = to_numpy(xp.stack([xp.mean(margin), xp.min(margin), xp.mean(lin), velocity_error]))
+    names = ("Step/margin_mean", "Step/margin_min", "Step/lin_acc_norm_mean", "Step/velocity_error_mean")
+    return {name: float(value) for name, value in zip(names, values, strict=True)}
 
 
 def summarize(episodes: Iterable[Mapping[str, float]]) -> dict[str, dict[str, float]]:

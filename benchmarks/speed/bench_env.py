@@ -41,7 +41,10 @@ def env_runner(env_id: str, num_envs: int, actions: np.ndarray, **kwargs: object
     # Same-step autoreset: the mode of the training adapters (and of this benchmark's history); next-step
     # mode costs one more step per episode end (of 1000-step episodes).
     env = gym.make_vec(
-        env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", autoreset_mode=AutoresetMode.SAME_STEP,
+        env_id,
+        num_envs=num_envs,
+        vectorization_mode="vector_entry_point",
+        autoreset_mode=AutoresetMode.SAME_STEP,
         **kwargs,
     )
     env.reset(seed=0)

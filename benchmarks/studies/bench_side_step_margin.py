@@ -97,8 +97,10 @@ def main() -> int:
         ap.error("need 0 < --resolution <= --span and --step >= 0")
     grounds = {"flat": stance_feet(args.robot, 0.0), "side step": stance_feet(args.robot, args.step)}
     print(machine_line())
-    print(f"{args.robot}: side step {args.step:.2f} m, CoM within +-{args.span:.2f} m, grid {args.resolution} m, "
-          f"vertical CoM acceleration {args.com_acc_z:g} m/s^2")
+    print(
+        f"{args.robot}: side step {args.step:.2f} m, CoM within +-{args.span:.2f} m, grid {args.resolution} m, "
+        f"vertical CoM acceleration {args.com_acc_z:g} m/s^2"
+    )
     rows, record = [], {}
     for name, stance in STANCES.items():
         found = {

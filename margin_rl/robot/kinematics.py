@@ -12,24 +12,29 @@ from __future__ import annotations
 import dataclasses
 import functools
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
+
+from margin_rl.arrays import namespace
 
 
 class UnreachableFootError(ValueError):
     """A foot target lies outside the leg workspace or needs a joint beyond its limits."""
 
 
-def quat_wxyz_to_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of quaternions (..., 4) given as (w, x, y, z) (normalised here)."""
-    q = np.asarray(quat_wxyz, dtype=float)
-    w, x, y, z = np.moveaxis(q / np.linalg.norm(q, axis=-1, keepdims=True), -1, 0)
-    return np.stack(
+def quat_wxyz_to_matrix(quat_wxyz: Any) -> Any:
+    """Rotation matrices (..., 3, 3) of quaternions (..., 4) given as (w, x, y, z) (normalised here); numpy arrays
+    (and array-likes) or torch tensors (:mod:`margin_rl.arrays`), answered in the same kind."""
+    xp = namespace(quat_wxyz)
+    q = xp.astype(xp.asarray(quat_wxyz), xp.float64, copy=False)
+    q = q / xp.linalg.vector_norm(q, axis=-1, keepdims=True)
+    w, x, y, z = (q[..., i] for i in range(4))
+    return xp.stack(
         [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+            xp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            xp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            xp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
         ],
         axis=-2,
     )

@@ -100,16 +100,12 @@ def test_every_termination_cause_is_the_same_on_torch(seed: int) -> None:
     assert [causes[name][0] for name in CAUSE_NAMES] == [name == "diverged" for name in CAUSE_NAMES]
 
 
-@settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1))
-def test_lambda_from_the_simulation_is_the_same_on_torch(seed: int) -> None:
-    """lambda (seed 000 eq. 4) from world-frame quantities, its heading frame and the stance width: the same numbers
-    from torch tensors as from numpy arrays, and lambda's layout round-trips through from_lambda."""
-    rng = np.random.default_rng(seed)
+def simulation_inputs(rng: np.random.Generator) -> list[np.ndarray]:
+    """The world-frame arguments of lambda_from_simulation for N random states (unit quaternions, feet, contacts)."""
     quaternion = rng.normal(size=(N, 4))
     quaternion /= np.linalg.norm(quaternion, axis=1, keepdims=True)
     rotation = np.stack([quat_wxyz_to_matrix(q) for q in quaternion])
-    arguments = [
+    return [
         rotation,
         rng.normal(size=(N, 3)),  # com
         rng.normal(size=(N, 3)),  # com_vel
@@ -122,6 +118,15 @@ def test_lambda_from_the_simulation_is_the_same_on_torch(seed: int) -> None:
         rng.random((N, 4)) < 0.7,  # contacts
         rng.normal(size=(N, 4, 3)),  # normals
     ]
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_lambda_from_the_simulation_is_the_same_on_torch(seed: int) -> None:
+    """lambda (seed 000 eq. 4) from world-frame quantities, its heading frame and the stance width: the same numbers
+    from torch tensors as from numpy arrays, and lambda's layout round-trips through from_lambda."""
+    arguments = simulation_inputs(np.random.default_rng(seed))
+    rotation = arguments[0]
     lam = lambda_from_simulation(*arguments)
     lam_t = lambda_from_simulation(*(torch.from_numpy(a) for a in arguments))
     assert isinstance(lam, np.ndarray) and lam.shape == (N, LAMBDA_DIM) and lam_t.dtype == torch.float64
@@ -132,3 +137,72 @@ def test_lambda_from_the_simulation_is_the_same_on_torch(seed: int) -> None:
     np.testing.assert_allclose(heading[:, 2], np.tile([0.0, 0.0, 1.0], (N, 1)))  # H keeps the world's z axis
     feet_h = from_lambda(lam).feet
     np.testing.assert_allclose(stance_width(torch.from_numpy(feet_h)).numpy(), stance_width(feet_h), atol=1e-15)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_base_rotation_from_the_quaternion_is_the_same_on_torch(seed: int) -> None:
+    """quat_wxyz_to_matrix on tensors equals numpy's to rounding, and both are rotations (R^T R = I, det 1)."""
+    quaternion = np.random.default_rng(seed).normal(size=(N, 4))
+    rotation = quat_wxyz_to_matrix(quaternion)
+    rotation_t = quat_wxyz_to_matrix(torch.from_numpy(quaternion))
+    np.testing.assert_allclose(rotation_t.numpy(), rotation, atol=1e-14)
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", rotation, rotation), np.broadcast_to(np.eye(3), (N, 3, 3)),
+                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(np.linalg.det(rotation), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("terrain", ["flat", "rough"])
+def test_terrain_heights_and_normals_are_the_same_on_torch(terrain: str) -> None:
+    """Bilinear heights and central-difference normals of the heightfield (and of flat ground) on tensors equal
+    numpy's; the grid goes to the tensors' device once and is left out of pickles."""
+    import pickle
+
+    from margin_rl.envs.terrain import TerrainConfig, flat_terrain, rough_terrain
+
+    ground = flat_terrain() if terrain == "flat" else rough_terrain(TerrainConfig(size=8.0, border=2.0), seed=4)
+    points = np.random.default_rng(0).uniform(-6, 6, size=(N, 4, 2))
+    heights, normals = ground.height(points), ground.normal(points)
+    points_t = torch.from_numpy(points)
+    np.testing.assert_allclose(ground.height(points_t).numpy(), heights, atol=1e-12)
+    np.testing.assert_allclose(ground.normal(points_t).numpy(), normals, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=-1), 1.0)
+    np.testing.assert_array_equal(ground.spawn_points_like(points_t).numpy(), ground.spawn_points)
+    assert pickle.loads(pickle.dumps(ground))._on_device == {}
+    if terrain == "rough":
+        assert np.ptp(heights) > 0.05 and np.any(normals[..., 2] < 0.999)  # the points met slopes and steps
+
+
+def test_observations_are_assembled_the_same_on_torch() -> None:
+    """The observation layout on tensors (with the tensors' generator drawing the noise) equals numpy's without
+    noise, and stays within each term's noise band with it."""
+    from margin_rl.arrays import TorchRandom
+    from margin_rl.envs.observations import POLICY_OBSERVATIONS, assemble
+
+    rng = np.random.default_rng(1)
+    values = {t.name: rng.normal(size=(N, t.size)) for t in POLICY_OBSERVATIONS}
+    clean = assemble(values, POLICY_OBSERVATIONS, 0.0, rng)
+    values_t = {name: torch.from_numpy(v) for name, v in values.items()}
+    clean_t = assemble(values_t, POLICY_OBSERVATIONS, 0.0, TorchRandom(0, "cpu"))
+    assert clean_t.dtype == torch.float32
+    np.testing.assert_array_equal(clean_t.numpy(), clean)
+    noisy_t = assemble(values_t, POLICY_OBSERVATIONS, 1.0, TorchRandom(0, "cpu")).numpy()
+    band = np.concatenate([np.full(t.size, t.noise * t.scale) for t in POLICY_OBSERVATIONS])
+    assert np.all(np.abs(noisy_t - clean) <= band + 1e-6) and np.any(noisy_t != clean)
+
+
+@pytest.mark.parametrize("robot", ["anymal_b", "anymal_c"])
+def test_the_learned_margin_of_the_environments_is_the_same_network_on_torch(robot: str) -> None:
+    """The env's learned margin function answers tensors with the torch form of the one network (float32 layers, as
+    numpy's batch path): equal to numpy's to float32 rounding; 'none' gives zeros of the input's kind."""
+    from margin_rl.envs.margin_kinds import make_margin_function
+    from margin_rl.robot import load_robot
+
+    states = lambda_from_simulation(*simulation_inputs(np.random.default_rng(2)))
+    margin = make_margin_function("learned", load_robot(robot), None, -0.5)
+    values, values_t = margin(states), margin(torch.from_numpy(states))
+    assert isinstance(values_t, torch.Tensor) and values_t.dtype == torch.float64
+    np.testing.assert_allclose(values_t.numpy(), values, atol=2e-6)
+    assert np.ptp(values) > 1e-3  # different states, different margins
+    zero = make_margin_function("none", load_robot(robot), None, -0.5)(torch.from_numpy(states))
+    assert isinstance(zero, torch.Tensor) and not zero.any()

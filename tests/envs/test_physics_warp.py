@@ -15,8 +15,10 @@ import pickle
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 
 import margin_rl  # noqa: F401 - registers the ids
+from margin_rl.arrays import TorchRandom, like, to_numpy
 from margin_rl.envs.backends import make_physics
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore
@@ -40,12 +42,35 @@ RANDOMISED = RandomizationConfig(friction=(0.4, 1.0), added_base_mass=(-5.0, 5.0
 FLAT = {"qpos": 1e-5, "qvel": 1e-3, "lambda": 0.01, "margin": 5e-5, "reward": 5e-5, "observation": 2e-4}
 
 
+class _HostDrawsAsTensors:
+    """numpy's draws answered as tensors: the Warp core's generator in the parity tests, so that both cores draw the
+    same numbers (pushes, noise, resets) from one state."""
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+
+    def uniform(self, *args: object, **kwargs: object) -> torch.Tensor:
+        return torch.as_tensor(self.rng.uniform(*args, **kwargs))
+
+    def integers(self, *args: object, **kwargs: object) -> torch.Tensor:
+        return torch.as_tensor(self.rng.integers(*args, **kwargs))
+
+    def exponential(self, *args: object, **kwargs: object) -> torch.Tensor:
+        return torch.as_tensor(self.rng.exponential(*args, **kwargs))
+
+
 def _mirror(source: AnymalCore, target: AnymalCore) -> None:
     """Give ``target`` (another backend) ``source``'s whole state: physics rows, per-world fields, and the core's
-    own (random generator, filters, commands, pushes, counters), as pickling does between backends."""
+    own (random generator, filters, commands, pushes, counters), as pickling does between backends; the arrays as
+    the target's tensors."""
     target.physics.set_state(source.physics.get_state())
     for name in AnymalCore._STATE:
-        setattr(target, name, copy.deepcopy(getattr(source, name)))
+        value = copy.deepcopy(getattr(source, name))
+        if name == "rng":
+            value = _HostDrawsAsTensors(value)
+        elif isinstance(value, np.ndarray):
+            value = like(value, target.physics.qpos)
+        setattr(target, name, value)
 
 
 def _pair(terrain: str, **options: object) -> tuple[AnymalCore, AnymalCore]:
@@ -87,11 +112,12 @@ def _steps_from_the_same_state(terrain: str, steps: int, seed: int):
             reference.reset(np.array([1, 4]))
         _mirror(reference, warp)
         if k == steps // 2:  # the reset worlds' clocks restart, the others' run on (float32 time)
-            np.testing.assert_array_equal(warp.physics.time[[1, 4]], 0.0)
-            np.testing.assert_allclose(warp.physics.time, reference.physics.time, rtol=1e-6)
+            np.testing.assert_array_equal(to_numpy(warp.physics.time)[[1, 4]], 0.0)
+            np.testing.assert_allclose(to_numpy(warp.physics.time), reference.physics.time, rtol=1e-6)
         actions = rng.uniform(-0.5, 0.5, size=(N, 12))
         expected, got = reference.step(actions), warp.step(actions)
-        yield reference, warp, expected, got
+        assert isinstance(got.reward, torch.Tensor)  # the Warp core answers in the physics' tensors
+        yield reference, warp, expected, got.to_numpy()
 
 
 def test_one_decimated_step_at_a_time_matches_mujoco_on_flat_ground() -> None:
@@ -100,7 +126,7 @@ def test_one_decimated_step_at_a_time_matches_mujoco_on_flat_ground() -> None:
     for reference, warp, expected, got in _steps_from_the_same_state("flat", steps=12, seed=0):
         pushed += int(np.count_nonzero(reference._push_applied[:, 0]))
         for name in ("qpos", "qvel"):
-            diff = np.abs(getattr(warp.physics, name) - getattr(reference.physics, name)).max()
+            diff = np.abs(to_numpy(getattr(warp.physics, name)) - getattr(reference.physics, name)).max()
             assert diff < FLAT[name], (name, diff)
         np.testing.assert_allclose(got.info["lambda"], expected.info["lambda"], atol=FLAT["lambda"])
         np.testing.assert_allclose(got.info["margin"], expected.info["margin"], atol=FLAT["margin"])
@@ -124,7 +150,7 @@ def test_one_decimated_step_at_a_time_matches_mujoco_on_the_heightfield() -> Non
         agree.extend(same)
         margin.extend(np.abs(got.info["margin"] - expected.info["margin"])[same])
         reward.extend(np.abs(got.reward - expected.reward)[same])
-        qpos.extend(np.abs(warp.physics.qpos - reference.physics.qpos).max(axis=1))
+        qpos.extend(np.abs(to_numpy(warp.physics.qpos) - reference.physics.qpos).max(axis=1))
         terminated_equal.extend(got.terminated == expected.terminated)
     assert np.mean(agree) >= 0.95
     assert np.percentile(margin, 95) < 0.02 and max(margin) < 0.06  # [m]
@@ -137,11 +163,16 @@ def test_per_world_fields_reach_the_physics() -> None:
     """Friction and base mass written per world change that world's dynamics on Warp as on MuJoCo."""
     reference, warp = _pair("flat")
     warp.reset(seed=11)
-    masses = warp.physics.per_env_field("body_mass")
-    np.testing.assert_allclose(masses, reference.physics.per_env_field("body_mass"), rtol=1e-6)
-    assert np.ptp(masses[:, warp._base]) > 1.0  # the randomisation drew different masses
-    np.testing.assert_allclose(warp.mu, reference.mu)
-    floor = warp.physics.per_env_field("geom_friction")[:, warp._floor, 0]
+    masses = to_numpy(warp.physics.per_env_field("body_mass"))
+    assert np.ptp(masses[:, warp._base]) > 1.0  # the randomisation drew different masses (the core's own draws)
+    _mirror(reference, warp)  # MuJoCo's fields and generator: the resets below draw the same numbers in both
+    reference.reset()
+    warp.reset()
+    np.testing.assert_allclose(
+        to_numpy(warp.physics.per_env_field("body_mass")), reference.physics.per_env_field("body_mass"), rtol=1e-6
+    )
+    np.testing.assert_allclose(to_numpy(warp.mu), reference.mu)
+    floor = to_numpy(warp.physics.per_env_field("geom_friction"))[:, warp._floor, 0]
     np.testing.assert_allclose(
         floor, reference.physics.per_env_field("geom_friction")[:, reference._floor, 0], rtol=1e-6
     )
@@ -159,7 +190,7 @@ def test_rollouts_agree_in_distribution() -> None:
         core.reset(seed=5)
         velocities, margins, falls = [], [], 0
         for _ in range(60):
-            out = core.step(np.zeros((N, 12)))
+            out = core.step(np.zeros((N, 12))).to_numpy()
             velocities.append(out.info["base_lin_vel"][:, 0])
             margins.append(out.info["margin"])
             falls += int(out.info["fell"].sum())
@@ -215,7 +246,7 @@ def test_copies_step_to_the_same_numbers() -> None:
         copied = make_copy(core)
         assert isinstance(copied.physics, WarpPhysics)
         actions = np.full((4, 12), -0.1)
-        a, b = core.step(actions), copied.step(actions)
+        a, b = core.step(actions).to_numpy(), copied.step(actions).to_numpy()
         np.testing.assert_array_equal(a.observation, b.observation)
         np.testing.assert_array_equal(a.reward, b.reward)
         core = copied
@@ -253,3 +284,41 @@ def test_a_short_rsl_training_on_the_warp_backend_is_reproducible() -> None:
     (start_a, end_a), (_, end_b) = train(), train()
     torch.testing.assert_close(end_a, end_b, rtol=0, atol=0)
     assert not torch.equal(start_a, end_a)
+
+
+def test_the_warp_core_keeps_its_whole_state_on_the_physics_device() -> None:
+    """Beside Warp the core computes on the physics' tensors: after steps, pushes, randomised resets and an autoreset,
+    every array of its state and of its outputs is a float64/bool/int64 tensor on that device, its generator a torch
+    one; the Gymnasium edge gets numpy."""
+    core = AnymalCore(EnvConfig(robot="anymal_c", randomization=RANDOMISED), num_envs=4, seed=1, **WARP_CPU)
+    core.reset(seed=1)
+    core.push(np.array([0, 2]), np.array([[60.0, 0.0, 0.0], [0.0, 60.0, 0.0]]), 0.1, frame="heading")
+    for _ in range(5):
+        out = core.step(torch.zeros(4, 12))
+    core.episode_step[1] = core.max_episode_steps - 1  # environment 1 times out at the next step: autoreset
+    out = core.step(torch.zeros(4, 12))
+    assert bool(out.truncated[1]) and int(core.episode_step[1]) == 0
+    assert isinstance(core.rng, TorchRandom)
+    for name in AnymalCore._STATE:
+        value = getattr(core, name)
+        if name not in ("rng", "max_episode_steps"):
+            assert isinstance(value, torch.Tensor) and value.device == core.physics.qpos.device, name
+    arrays = [out.observation, out.reward, out.terminated, out.truncated, out.final_observation, *out.info.values()]
+    assert all(isinstance(a, torch.Tensor) for a in arrays)
+    assert out.observation.dtype == torch.float32 and out.reward.dtype == torch.float64
+    host = out.to_numpy()
+    assert isinstance(host.reward, np.ndarray) and all(isinstance(v, np.ndarray) for v in host.info.values())
+
+
+def test_rsl_rl_gets_the_physics_tensors_without_a_copy() -> None:
+    """make_rsl_env with the learner on the physics' device: the episode counter rsl-rl writes is the core's own
+    tensor, and observations, rewards and dones are tensors on that device."""
+    from margin_rl.train import make_rsl_env
+
+    env = make_rsl_env("margin_rl/AnymalC-v1", 3, seed=0, device="cpu", **WARP_CPU)
+    assert env.episode_length_buf.data_ptr() == env.core.episode_step.data_ptr()
+    env.episode_length_buf = torch.tensor([5, 6, 7])
+    assert env.core.episode_step.tolist() == [5, 6, 7]
+    observations, rewards, dones, extras = env.step(torch.zeros(3, 12))
+    assert observations["policy"].shape == (3, 48) and rewards.dtype == torch.float32 and dones.shape == (3,)
+    assert extras["time_outs"].device == rewards.device == torch.device("cpu")

@@ -41,6 +41,7 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner  # needs GIT_PYTHON_REFRESH without git: set in margin_rl.train
 from tensordict import TensorDict
 
+from margin_rl.arrays import generator_state, like, set_generator_state
 from margin_rl.atomic import atomic_write
 from margin_rl.envs.core import AnymalCore
 from margin_rl.train.config import to_dict
@@ -71,7 +72,7 @@ class RslVecEnv(VecEnv):
         self.device = torch.device(device)
         self.cfg: dict[str, Any] = to_dict(core.config)
         self.privileged = bool(core.config.privileged_observations)
-        self.stats = EpisodeStatistics(core.num_envs, core.dt)
+        self.stats = EpisodeStatistics(core.num_envs, core.dt, like=core.episode_step)  # sums where the core is
         self.core.reset()
         self._obs = self._observations(core.observe_all())
 
@@ -82,38 +83,45 @@ class RslVecEnv(VecEnv):
 
     @property
     def episode_length_buf(self) -> torch.Tensor:
-        """Steps taken in the current episodes (N,), int64: a view of the core's counter, which decides time-outs."""
-        return torch.from_numpy(self.core.episode_step).to(self.device)
+        """Steps taken in the current episodes (N,), int64: the core's counter, which decides time-outs (a view where
+        the core computes on the learner's device or on the CPU)."""
+        return torch.as_tensor(self.core.episode_step, device=self.device)
 
     @episode_length_buf.setter
     def episode_length_buf(self, value: torch.Tensor) -> None:
-        steps = np.asarray(torch.as_tensor(value).detach().cpu().numpy(), dtype=np.int64).reshape(self.num_envs)
-        self.core.episode_step[:] = steps
+        steps = torch.as_tensor(value).detach().reshape(self.num_envs).to(torch.int64)
+        self.core.episode_step[:] = like(steps, self.core.episode_step)
 
-    def _observations(self, policy: np.ndarray) -> TensorDict:
-        groups = {"policy": torch.from_numpy(np.ascontiguousarray(policy, dtype=np.float32))}
+    def _tensor(self, value: Any, dtype: torch.dtype | None = None) -> torch.Tensor:
+        """A core array (numpy, or a tensor on the physics' device) on the learner's device, copied only where it
+        is elsewhere or of another dtype."""
+        return torch.as_tensor(value, dtype=dtype, device=self.device)
+
+    def _observations(self, policy: Any) -> TensorDict:
+        groups = {"policy": self._tensor(policy, torch.float32)}
         if self.privileged:
-            groups["critic"] = torch.from_numpy(self.core.privileged_observation().astype(np.float32))
-        return TensorDict(groups, batch_size=[self.num_envs]).to(self.device)
+            groups["critic"] = self._tensor(self.core.privileged_observation(), torch.float32)
+        return TensorDict(groups, batch_size=[self.num_envs], device=self.device)
 
     def get_observations(self) -> TensorDict:
         return self._obs
 
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict[str, Any]]:
-        out = self.core.step(actions.detach().to("cpu", torch.float64).numpy())
-        obs = {"policy": torch.from_numpy(out.observation)}
+        out = self.core.step(actions.detach())
+        obs = {"policy": self._tensor(out.observation, torch.float32)}
         if self.privileged and out.privileged is not None:
-            obs["critic"] = torch.from_numpy(out.privileged.astype(np.float32))
-        self._obs = TensorDict(obs, batch_size=[self.num_envs]).to(self.device)
-        rewards = torch.as_tensor(out.reward, dtype=torch.float32, device=self.device)
-        dones = torch.as_tensor(out.terminated | out.truncated, device=self.device)
+            obs["critic"] = self._tensor(out.privileged, torch.float32)
+        self._obs = TensorDict(obs, batch_size=[self.num_envs], device=self.device)
+        rewards = self._tensor(out.reward, torch.float32)
+        dones = self._tensor(out.terminated | out.truncated)
+        time_outs = self._tensor(out.truncated)
         finished = self.stats.update(out.reward, out.info, out.terminated, out.truncated)
         log: dict[str, float | torch.Tensor] = dict(step_tags(out.info))
         for tag, values in tensorboard_tags(finished).items():
             finite = values[np.isfinite(values)]
             if finite.size:
                 log[tag] = torch.as_tensor(finite, dtype=torch.float32)
-        extras = {"time_outs": torch.as_tensor(out.truncated, device=self.device), "log": log}
+        extras = {"time_outs": time_outs, "log": log}
         return self._obs, rewards, dones, extras
 
 
@@ -144,8 +152,9 @@ def make_rsl_env(
 
     ``env_options``: any :class:`~margin_rl.envs.config.EnvConfig` field (e.g. ``margin_weight=0.2``,
     ``reward_params={"alive_bonus": 0.1}``); ``seed`` seeds the initial states; ``device`` is the learner's,
-    ``physics`` and ``physics_device`` the simulator's (``"mujoco"``, or ``"warp"`` with ``"cpu"``: MuJoCo Warp on
-    Warp's CPU device; see :mod:`margin_rl.envs.physics_warp`). Example::
+    ``physics`` and ``physics_device`` the simulator's (``"mujoco"``, or ``"warp"`` with ``"cuda:0"`` or ``"cpu"``:
+    MuJoCo Warp, :mod:`margin_rl.envs.physics_warp`; with the learner on the physics' device the environment's tensors
+    reach rsl-rl without a copy). Example::
 
         from rsl_rl.runners import OnPolicyRunner
         from margin_rl.train import make_rsl_env
@@ -244,7 +253,7 @@ class CheckpointingRunner(OnPolicyRunner):
             "num_actions": int(self.adapter.num_actions),
             "action_std": self.exploration.last_mean_std,  # mean over the actions, after the last update
             "torch_rng_state": torch.get_rng_state(),
-            "numpy_rng_state": self.adapter.core.rng.bit_generator.state,
+            "numpy_rng_state": generator_state(self.adapter.core.rng),
         }
         return saved
 
@@ -264,7 +273,11 @@ class CheckpointingRunner(OnPolicyRunner):
         self.logger.tot_timesteps = self.env_steps
         self.logger.tot_time = float(infos.get("elapsed_s", 0.0))
         torch.set_rng_state(infos["torch_rng_state"])
-        self.adapter.core.rng.bit_generator.state = infos["numpy_rng_state"]
+        env_rng, saved = self.adapter.core.rng, infos["numpy_rng_state"]  # the key predates device generators
+        if isinstance(saved, dict) == isinstance(env_rng, np.random.Generator):
+            set_generator_state(env_rng, saved)
+        # else the run was trained on the other kind of physics (host <-> device): the environments' draws start
+        # from this run's seed, as its episodes start fresh
         # the std the run had reached: what a resume that adds no iteration (a finished run) saves again
         self.exploration.last_mean_std = infos.get("action_std")
 

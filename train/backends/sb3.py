@@ -42,6 +42,7 @@ from stable_baselines3.common.logger import configure
 from stable_baselines3.common.save_util import load_from_zip_file
 from stable_baselines3.common.vec_env import VecEnv
 
+from margin_rl.arrays import to_numpy
 from margin_rl.atomic import atomic_write
 from margin_rl.envs.core import ACTION_BOUND, AnymalCore
 from margin_rl.train.config import Sb3PPOConfig
@@ -99,7 +100,7 @@ class Sb3VecEnv(VecEnv):
         self.core.reset(seed=seed)
         self.stats.reset()
         self.reset_infos = [{} for _ in range(self.num_envs)]
-        return self.core.observe_all()
+        return to_numpy(self.core.observe_all())
 
     def step_summary(self) -> dict[str, float]:
         """Per-step statistics of the last step (:func:`margin_rl.train.metrics.step_tags`); empty before it."""
@@ -111,7 +112,7 @@ class Sb3VecEnv(VecEnv):
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
         if self._actions is None:
             raise RuntimeError("step_wait() called without step_async()")
-        out = self.core.step(self._actions)
+        out = self.core.step(self._actions).to_numpy()
         self._actions = None
         self.last_info = out.info
         done = out.terminated | out.truncated

@@ -111,7 +111,7 @@ class TrainSpec:
     env_config: EnvConfig | None = None
     ppo: PPOConfig = field(default_factory=RslPPOConfig)
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY  # environment steps between checkpoints
-    device: str = "cpu"  # learner device (the simulation always runs on the CPU)
+    device: str = "cpu"  # learner device (the simulation's: the physics_device of train(), not part of the run)
     # Warm start: the network weights of this trained model (rsl-rl .pt checkpoint or final model, SB3 .zip) are the
     # run's first weights; steps, optimizer and learning-rate schedule start fresh. None: random initialisation.
     init_from: str | None = None
@@ -447,7 +447,8 @@ def _run_backend(
     threads = usable_cores() if update_threads is None else update_threads
     learner = {"init_from": spec.init_from, "update_threads": threads}
     if isinstance(spec.ppo, RslPPOConfig):
-        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed, "cpu", *simulator)
+        # The env's tensors go to the learner's device: with the physics there too (Warp on that GPU), no copy at all.
+        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed, spec.device, *simulator)
         cfg = spec.backend_config(run_dir.name)
         return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final, **learner)
     venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed, *simulator)
@@ -526,7 +527,9 @@ def build_parser() -> argparse.ArgumentParser:
         "device for now). Not part of the run's config: a run resumes and evaluates on either",
     )
     parser.add_argument(
-        "--physics-device", default=None, help="the simulator's device (warp: cpu; default: the first GPU)"
+        "--physics-device",
+        default=None,
+        help="the simulator's device for warp: cuda:0, ... or cpu (default: the first GPU)",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="also print the backend's own logs")

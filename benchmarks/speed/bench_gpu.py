@@ -1,0 +1,296 @@
+"""Benchmark: training on one GPU with the MuJoCo Warp backend, side by side in one run, stage by stage.
+
+Usage (on a machine with a GPU; about 5 minutes including Warp's kernel compile)::
+
+    python benchmarks/speed/bench_gpu.py --device cuda:0 --out "$OUT"
+    python benchmarks/speed/bench_gpu.py --smoke --out /tmp/bench_gpu      # every stage, small, on Warp's CPU device
+
+Stages, in this order, each appended to ``<out>/bench_gpu.json`` as soon as it is measured (a run cut short keeps
+what it measured):
+
+1. ``physics``: raw Warp physics of the environments' model: the same random actions written as servo targets, the
+   decimated step (4 physics steps and the forward pass, a CUDA graph on a GPU), no environment work; env-steps/s
+   at each ``--num-envs``.
+2. ``env``: the batched environment core on the same device (``AnymalCore(physics="warp")``: lambda, the learned
+   margin's torch form, rewards, terminations, observations, resets), with the learned margin and with
+   ``margin="none"``, the same actions; env-steps/s and the ratio to stage 1.
+3. ``ppo``: rsl-rl PPO end to end (``make_rsl_env(..., physics="warp")``, ``OnPolicyRunner.learn``: rollouts and
+   updates, the learner on the same device), the robust recipe's PPO settings; env-steps/s.
+4. ``training``: the robust recipe on ANYmal C, both variants (margin weight 0 and the recipe's), ``--train-envs``
+   environments for ``--train-steps`` steps each through ``margin_rl.train``'s own ``train`` (checkpoints, the
+   run directory), then every checkpoint evaluated after training with the standard protocol of
+   ``benchmarks/studies/bench_learning_speed.py`` (deterministic 20 s episodes at 0.75 m/s from evaluation seed
+   1000 on ``mujoco.batch``): the time to the walking target (error <= 0.15 m/s, < 5 % falls) and to the end.
+
+Medians over ``--rounds`` interleaved rounds for stages 1 and 2 (round r measures every configuration once). On a
+GPU every timing waits for the device (``torch.cuda.synchronize``) before the clock is read.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks.harness
+
+os.environ.setdefault("GIT_PYTHON_REFRESH", "quiet")
+
+import numpy as np
+import torch
+
+from benchmarks.harness import machine, machine_line
+from margin_rl.atomic import atomic_write_text
+
+ROBOT_ID = "margin_rl/AnymalC-v1"
+RECIPE = "robust"
+JSON_NAME = "bench_gpu.json"
+LIBRARIES = ("mujoco", "mujoco-warp", "warp-lang", "torch", "rsl-rl-lib", "numpy")
+
+SMOKE = {
+    "device": "cpu",
+    "num_envs": [4, 8],
+    "steps": 6,
+    "rounds": 2,
+    "ppo_iterations": 1,
+    "train_envs": 8,
+    "train_steps": 8 * 24 * 2,
+    "episodes": 2,
+    "episode_steps": 10,
+}
+"""Every stage, small, on Warp's CPU device (what the CI test runs): checks the script, measures nothing useful."""
+
+
+class Record:
+    """The benchmark's JSON record, rewritten atomically after every stage."""
+
+    def __init__(self, path: Path, settings: dict[str, Any]) -> None:
+        self.path = path
+        self.data: dict[str, Any] = {
+            "command": " ".join([Path(sys.executable).name, *sys.argv]),
+            "machine": machine(LIBRARIES),
+            "gpu": torch.cuda.get_device_name(settings["device"]) if settings["device"].startswith("cuda") else None,
+            "settings": settings,
+            "stages": {},
+        }
+        self.write()
+
+    def stage(self, name: str, result: Any) -> None:
+        self.data["stages"][name] = result
+        self.write()
+        print(f"[{name}] {json.dumps(result, default=float)[:2000]}", flush=True)
+
+    def write(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(self.path, json.dumps(self.data, indent=2, default=float) + "\n")
+
+
+def synchronize(device: str) -> None:
+    if device.startswith("cuda"):
+        torch.cuda.synchronize(device)
+
+
+def timed_rate(step: Callable[[int], None], steps: int, num_envs: int, device: str) -> float:
+    """env-steps/s of ``steps`` calls of ``step(k)``, waiting for the device before each clock read."""
+    synchronize(device)
+    t0 = time.perf_counter()
+    for k in range(steps):
+        step(k)
+    synchronize(device)
+    return num_envs * steps / (time.perf_counter() - t0)
+
+
+def make_core(num_envs: int, device: str, margin: str) -> Any:
+    """The robust recipe's environment core of ANYmal C on the Warp backend at ``device``."""
+    from margin_rl.envs.core import AnymalCore
+    from margin_rl.train.commands.train import build_parser, spec_from_args
+
+    spec, _, _ = spec_from_args(build_parser().parse_args(["--env", ROBOT_ID, "--recipe", RECIPE]))
+    config = spec.env_config.replace(margin=margin)
+    core = AnymalCore(config, num_envs, seed=0, physics="warp", physics_device=device)
+    core.reset(seed=0)
+    return core
+
+
+def random_actions(steps: int, num_envs: int, device: str) -> torch.Tensor:
+    generator = torch.Generator(device="cpu").manual_seed(0)
+    return (torch.rand((steps, num_envs, 12), generator=generator, dtype=torch.float64) * 2 - 1).to(device)
+
+
+def step_runners(num_envs: int, steps: int, device: str) -> dict[str, Callable[[int], None]]:
+    """Configuration -> ``run(k)``, policy step k of one fixed sequence of random actions: the raw physics (the
+    servo targets the core would write, computed beforehand, then the decimated step) and the core with and without
+    the learned margin."""
+    actions = random_actions(steps, num_envs, device)
+    raw = make_core(num_envs, device, "none")
+    physics, decimation = raw.physics, raw.config.decimation
+    targets = (raw._key_ctrl + raw.config.action_scale * actions).to(physics.ctrl.dtype)
+
+    def raw_step(k: int) -> None:
+        physics.ctrl[:] = targets[k]
+        physics.step(decimation)
+
+    def env_step(margin: str) -> Callable[[int], None]:
+        core = make_core(num_envs, device, margin)
+        return lambda k: core.step(actions[k])
+
+    return {"physics": raw_step, "env_learned": env_step("learned"), "env_no_margin": env_step("none")}
+
+
+def physics_and_env(sizes: list[int], steps: int, rounds: int, device: str) -> dict[str, Any]:
+    """Stages 1 and 2: raw physics and the environment core, interleaved per round, at every size."""
+    results: dict[str, Any] = {}
+    for num_envs in sizes:
+        runners = step_runners(num_envs, steps, device)
+        for run in runners.values():  # warm-up: kernels compiled and loaded, graphs captured, torch modules built
+            for k in range(min(3, steps)):
+                run(k)
+        rates: dict[str, list[float]] = {name: [] for name in runners}
+        for _ in range(rounds):
+            for name, run in runners.items():
+                rates[name].append(timed_rate(run, steps, num_envs, device))
+        medians = {name: float(np.median(values)) for name, values in rates.items()}
+        results[str(num_envs)] = {
+            "env_steps_per_s": medians,
+            "rounds": rates,
+            "env_learned_over_physics": medians["env_learned"] / medians["physics"],
+            "env_no_margin_over_physics": medians["env_no_margin"] / medians["physics"],
+        }
+        del runners
+    return results
+
+
+def ppo(sizes: list[int], iterations: int, device: str) -> dict[str, Any]:
+    """Stage 3: rsl-rl PPO end to end with the robust recipe's settings on the learner's device."""
+    from rsl_rl.runners import OnPolicyRunner
+
+    from margin_rl.train.backends.rsl import rsl_vec_env
+    from margin_rl.train.commands.train import build_parser, spec_from_args
+    from margin_rl.train.runs import quiet_stdout
+
+    results: dict[str, Any] = {}
+    for num_envs in sizes:
+        argv = ["--env", ROBOT_ID, "--recipe", RECIPE, "--num-envs", str(num_envs), "--device", device]
+        spec, _, _ = spec_from_args(build_parser().parse_args(argv))
+        env = rsl_vec_env(spec.target, num_envs, 0, device, "warp", device)  # what `train --physics warp` builds
+        with quiet_stdout(True):  # rsl-rl prints the networks and a block per iteration
+            runner = OnPolicyRunner(env, spec.backend_config("bench"), log_dir=None, device=device)
+            runner.learn(num_learning_iterations=1)  # warm-up: graphs, kernels, the optimizer's state
+            synchronize(device)
+            t0 = time.perf_counter()
+            runner.learn(num_learning_iterations=iterations)
+            synchronize(device)
+            elapsed = time.perf_counter() - t0
+        steps = iterations * num_envs * spec.ppo.steps_per_env
+        results[str(num_envs)] = {"env_steps_per_s": steps / elapsed, "iterations": iterations, "env_steps": steps}
+        del runner, env
+    return results
+
+
+def training(args: argparse.Namespace, settings: dict[str, Any], out: Path) -> dict[str, Any]:
+    """Stage 4: both variants of the robust recipe, each trained then evaluated checkpoint by checkpoint."""
+    from benchmarks.studies.bench_learning_speed import FALL_FRACTION_TARGET, VELOCITY_ERROR_TARGET
+    from margin_rl.train.commands.evaluate import evaluate
+    from margin_rl.train.commands.train import build_parser, spec_from_args, train
+    from margin_rl.train.recipes import get_recipe
+
+    device = settings["device"]
+    results: dict[str, Any] = {}
+    runs_root = Path(args.runs_root) if args.runs_root else Path(tempfile.mkdtemp(prefix="bench_gpu_runs_"))
+    for weight in (0.0, get_recipe(RECIPE).margin_weight):
+        argv = [
+            "--env", ROBOT_ID, "--recipe", RECIPE, "--margin-weight", str(weight),
+            "--num-envs", str(settings["train_envs"]), "--total-steps", str(settings["train_steps"]),
+            "--checkpoint-every", str(max(1, settings["train_steps"] // 5)), "--device", device,
+        ]  # fmt: skip
+        spec, _, _ = spec_from_args(build_parser().parse_args(argv))
+        run_dir = runs_root / f"mw{weight:g}"
+        timeline: list[tuple[int, float, Path]] = []
+        t0 = time.perf_counter()
+
+        def checkpointed(path: Path, steps: int, timeline: list = timeline, t0: float = t0) -> None:
+            if not timeline or timeline[-1][0] != steps:  # the final checkpoint is reported again at the end
+                timeline.append((steps, time.perf_counter() - t0, path))
+
+        result = train(spec, run_dir, progress=False, physics="warp", physics_device=device, on_checkpoint=checkpointed)
+        rows = []
+        for steps, seconds, path in timeline:
+            report, _ = evaluate(
+                path, episodes=settings["episodes"], seed=1000, forward_velocity=0.75,
+                out_dir=path.parent / "eval" / path.stem, max_steps=settings["episode_steps"],
+            )  # fmt: skip
+            summary = report["summary"]
+            error, falls = summary["velocity_error_mean"]["mean"], summary["fell"]["mean"]
+            met = bool(error <= VELOCITY_ERROR_TARGET and falls < FALL_FRACTION_TARGET)
+            rows.append({"env_steps": steps, "seconds": seconds, "velocity_error": error, "falls": falls, "met": met})
+        first = next((r for r in rows if r["met"]), None)
+        results[f"margin_weight_{weight:g}"] = {
+            "train_seconds": result.elapsed_s,
+            "env_steps": result.env_steps,
+            "env_steps_per_s": result.steps_per_second,
+            "seconds_to_walking_target": None if first is None else first["seconds"],
+            "checkpoints": rows,
+            "final_model": str(result.final_model),
+        }
+    return results
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--smoke", action="store_true", help="every stage, small, on Warp's CPU device")
+    parser.add_argument("--device", default="cuda:0", help="Warp and torch device (default cuda:0)")
+    parser.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", ".")), help="folder of the JSON")
+    parser.add_argument("--num-envs", type=int, nargs="+", default=[1024, 4096, 8192])
+    parser.add_argument("--steps", type=int, default=100, help="policy steps per round (stages 1, 2)")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--ppo-iterations", type=int, default=3, help="timed PPO iterations (stage 3)")
+    parser.add_argument("--train-envs", type=int, default=4096)
+    parser.add_argument("--train-steps", type=int, default=10_000_000)
+    parser.add_argument("--episodes", type=int, default=16, help="evaluation episodes per checkpoint (stage 4)")
+    parser.add_argument("--runs-root", help="where stage 4's runs go (default: a temporary folder)")
+    parser.add_argument(
+        "--stages", nargs="+", default=["physics_and_env", "ppo", "training"],
+        choices=["physics_and_env", "ppo", "training"],
+    )  # fmt: skip
+    args = parser.parse_args(argv)
+    settings: dict[str, Any] = {
+        "device": args.device,
+        "num_envs": args.num_envs,
+        "steps": args.steps,
+        "rounds": args.rounds,
+        "ppo_iterations": args.ppo_iterations,
+        "train_envs": args.train_envs,
+        "train_steps": args.train_steps,
+        "episodes": args.episodes,
+        "episode_steps": None,  # whole 20 s episodes
+    }
+    if args.smoke:
+        settings.update(SMOKE)
+    if settings["device"].startswith("cuda") and not torch.cuda.is_available():
+        parser.error(f"--device {settings['device']}: torch finds no GPU here; use --smoke for Warp's CPU device")
+    print(machine_line(LIBRARIES), flush=True)
+    record = Record(args.out / JSON_NAME, {**settings, "smoke": args.smoke})
+    started = time.perf_counter()
+    if "physics_and_env" in args.stages:
+        record.stage(
+            "physics_and_env",
+            physics_and_env(settings["num_envs"], settings["steps"], settings["rounds"], settings["device"]),
+        )
+    if "ppo" in args.stages:
+        record.stage("ppo", ppo(settings["num_envs"], settings["ppo_iterations"], settings["device"]))
+    if "training" in args.stages:
+        record.stage("training", training(args, settings, args.out))
+    record.data["wall_seconds"] = time.perf_counter() - started
+    record.write()
+    print(f"wrote {record.path} ({record.data['wall_seconds']:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,34 @@
+"""benchmarks/speed/bench_gpu.py --smoke: every stage of the GPU benchmark, small, on Warp's CPU device, so that the
+script a GPU session runs once is known to run to its end and to write its record."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from tests.conftest import require_mujoco_warp
+
+require_mujoco_warp()
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks
+
+from benchmarks.speed import bench_gpu  # noqa: E402
+
+
+def test_every_stage_runs_small_on_warps_cpu_device_and_writes_its_record(tmp_path: Path) -> None:
+    assert bench_gpu.main(["--smoke", "--out", str(tmp_path), "--runs-root", str(tmp_path / "runs")]) == 0
+    record = json.loads((tmp_path / bench_gpu.JSON_NAME).read_text())
+    assert record["settings"]["smoke"] and record["settings"]["device"] == "cpu" and record["gpu"] is None
+    stages = record["stages"]
+    assert list(stages) == ["physics_and_env", "ppo", "training"]
+    for size in map(str, bench_gpu.SMOKE["num_envs"]):
+        rates = stages["physics_and_env"][size]["env_steps_per_s"]
+        assert set(rates) == {"physics", "env_learned", "env_no_margin"} and min(rates.values()) > 0
+        assert stages["ppo"][size]["env_steps_per_s"] > 0
+    for variant in ("margin_weight_0", "margin_weight_0.1"):
+        run = stages["training"][variant]
+        assert run["env_steps"] == bench_gpu.SMOKE["train_steps"] and Path(run["final_model"]).is_file()
+        steps = [row["env_steps"] for row in run["checkpoints"]]
+        assert steps == sorted(set(steps)) and steps[-1] == run["env_steps"]  # each checkpoint once, the last too
+        assert all(0 <= row["falls"] <= 1 and row["velocity_error"] >= 0 for row in run["checkpoints"])

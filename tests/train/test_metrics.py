@@ -1,0 +1,65 @@
+"""margin_rl.train.metrics on a device's tensors: the episode sums kept where the environment's arrays are give the
+metrics the host's numpy sums give (the hand-checked cases are in tests/train/backends/test_backends.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from margin_rl.train.metrics import EpisodeStatistics, step_tags
+
+N = 6
+
+
+def step_info(rng: np.random.Generator) -> dict[str, np.ndarray]:
+    return {
+        "reward_velocity_tracking": rng.uniform(0, 1, N),
+        "reward_margin": rng.normal(0, 0.1, N),
+        "margin": rng.normal(0, 0.1, N),
+        "base_lin_acc": rng.normal(0, 5, (N, 3)),
+        "base_ang_acc": rng.normal(0, 20, (N, 3)),
+        "base_lin_vel": rng.normal(0.5, 0.2, (N, 3)),
+        "velocity_error": rng.uniform(0, 0.5, N),
+        "stance_width": rng.uniform(0.3, 0.5, N),
+        "base_height": rng.uniform(0.4, 0.6, N),
+        "fell": (rng.random(N) < 0.1).astype(float),
+        "diverged": np.zeros(N),
+        "termination_base_contact": (rng.random(N) < 0.1).astype(float),
+    }
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), warmup=st.integers(0, 3))
+def test_episode_statistics_on_tensors_equal_numpys(seed: int, warmup: int) -> None:
+    rng = np.random.default_rng(seed)
+    host = EpisodeStatistics(N, 0.02, warmup_steps=warmup)
+    device = EpisodeStatistics(N, 0.02, warmup_steps=warmup, like=torch.zeros(1))
+    ended = 0
+    for _ in range(25):
+        info, reward = step_info(rng), rng.normal(size=N)
+        terminated, truncated = rng.random(N) < 0.1, rng.random(N) < 0.05
+        expected = host.update(reward, info, terminated, truncated)
+        got = device.update(
+            torch.from_numpy(reward),
+            {k: torch.from_numpy(v) for k, v in info.items()},
+            torch.from_numpy(terminated),
+            torch.from_numpy(truncated),
+        )
+        assert sorted(got) == sorted(expected)
+        for key, values in expected.items():
+            assert isinstance(got[key], np.ndarray)  # finished episodes come back to the host
+            np.testing.assert_allclose(got[key], values, rtol=1e-12, atol=1e-12, err_msg=key)
+        ended += len(expected.get("env", []))
+        tags, tags_t = step_tags(info), step_tags({k: torch.from_numpy(v) for k, v in info.items()})
+        assert tags_t.keys() == tags.keys() and all(abs(tags_t[k] - v) < 1e-12 for k, v in tags.items())
+    info, reward, running = step_info(rng), rng.normal(size=N), np.zeros(N, dtype=bool)  # every episode >= 1 step
+    host.update(reward, info, running, running)
+    on_device = {k: torch.from_numpy(v) for k, v in info.items()}
+    device.update(torch.from_numpy(reward), on_device, torch.from_numpy(running), torch.from_numpy(running))
+    closed = host.close(np.arange(N), info)
+    closed_t = device.close(torch.arange(N), {k: torch.from_numpy(v) for k, v in info.items()})
+    for key, values in closed.items():
+        np.testing.assert_allclose(closed_t[key], values, rtol=1e-12, atol=1e-12, err_msg=key)
+    assert ended > 0  # the comparison met finished episodes, not only running sums

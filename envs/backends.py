@@ -31,6 +31,11 @@ class PhysicsChoice:
     device: str | None
     options: dict[str, Any]
 
+    @property
+    def arguments(self) -> tuple[str, str | None, dict[str, Any]]:
+        """(physics, physics_device, physics_options), the construction arguments of a core or a training env."""
+        return self.name, self.device, self.options
+
 
 def make_physics(
     name: str, model: mujoco.MjModel, num_envs: int, device: str | None = None, options: Mapping[str, Any] | None = None

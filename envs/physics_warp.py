@@ -246,7 +246,8 @@ class WarpPhysics(ModelConstants):
         raise PhysicsOverflowError(
             f"MuJoCo Warp dropped contacts or constraint rows ({kinds!r}) in {worlds.size} of {self.num_envs} worlds "
             f"(first: {worlds[:5].tolist()}); the buffers hold nconmax={self.nconmax} contacts and njmax={self.njmax} "
-            "constraint rows per world: raise them (physics_options={'nconmax': ..., 'njmax': ...}), e.g. double both"
+            "constraint rows per world: raise them (physics_options={'nconmax': ..., 'njmax': ...}; on the command "
+            "line --physics-option nconmax=... --physics-option njmax=...), e.g. double both"
         )
 
     def _collect_overflow(self) -> None:

@@ -124,11 +124,18 @@ def weights_identity(source: str) -> dict[str, Any]:
 
 
 def make_core(
-    config: EnvConfig, num_envs: int, seed: int | None, physics: str = "mujoco", physics_device: str | None = None
+    config: EnvConfig,
+    num_envs: int,
+    seed: int | None,
+    physics: str = "mujoco",
+    physics_device: str | None = None,
+    physics_options: dict[str, Any] | None = None,
 ) -> AnymalCore:
     """The batched simulation of ``num_envs`` environments (reset by the adapters) on backend ``physics`` at
-    ``physics_device`` (:func:`margin_rl.envs.backends.make_physics`)."""
-    return AnymalCore(config, num_envs=num_envs, seed=seed, physics=physics, physics_device=physics_device)
+    ``physics_device`` with its ``physics_options`` (:func:`margin_rl.envs.backends.make_physics`)."""
+    return AnymalCore(
+        config, num_envs, seed, physics=physics, physics_device=physics_device, physics_options=physics_options
+    )
 
 
 def observation_size(core: AnymalCore) -> int:

@@ -132,10 +132,11 @@ def rsl_vec_env(
     device: str = "cpu",
     physics: str = "mujoco",
     physics_device: str | None = None,
+    physics_options: dict[str, Any] | None = None,
 ) -> RslVecEnv:
     """The training ``VecEnv`` of an environment target: :class:`RslVecEnv` over the batched core (on backend
-    ``physics`` at ``physics_device``; ``device``: where its tensors go, the learner's)."""
-    return RslVecEnv(make_core(target.config, num_envs, seed, physics, physics_device), device)
+    ``physics`` at ``physics_device`` with ``physics_options``; ``device``: where its tensors go, the learner's)."""
+    return RslVecEnv(make_core(target.config, num_envs, seed, physics, physics_device, physics_options), device)
 
 
 def make_rsl_env(
@@ -145,6 +146,7 @@ def make_rsl_env(
     device: str = "cpu",
     physics: str = "mujoco",
     physics_device: str | None = None,
+    physics_options: dict[str, Any] | None = None,
     **env_options: Any,
 ) -> RslVecEnv:
     """An rsl-rl ``VecEnv`` of ``num_envs`` environments of a margin_rl ANYmal id, over the batched simulation
@@ -154,7 +156,7 @@ def make_rsl_env(
     ``reward_params={"alive_bonus": 0.1}``); ``seed`` seeds the initial states; ``device`` is the learner's,
     ``physics`` and ``physics_device`` the simulator's (``"mujoco"``, or ``"warp"`` with ``"cuda:0"`` or ``"cpu"``:
     MuJoCo Warp, :mod:`margin_rl.envs.physics_warp`; with the learner on the physics' device the environment's tensors
-    reach rsl-rl without a copy). Example::
+    reach rsl-rl without a copy), ``physics_options`` its settings (Warp: ``nconmax``, ``njmax``). Example::
 
         from rsl_rl.runners import OnPolicyRunner
         from margin_rl.train import make_rsl_env
@@ -170,7 +172,7 @@ def make_rsl_env(
         TypeError: an option that is not an EnvConfig field, or a badly typed value.
     """
     config = anymal_config(env_id, env_options, "make_rsl_env")
-    return RslVecEnv(make_core(config, num_envs, seed, physics, physics_device), device)
+    return RslVecEnv(make_core(config, num_envs, seed, physics, physics_device, physics_options), device)
 
 
 class TrainingStopped(Exception):  # noqa: N818 - a control-flow signal, not an error

@@ -159,11 +159,16 @@ class Sb3VecEnv(VecEnv):
 
 
 def sb3_vec_env(
-    target: AnymalTarget, num_envs: int, seed: int | None, physics: str = "mujoco", physics_device: str | None = None
+    target: AnymalTarget,
+    num_envs: int,
+    seed: int | None,
+    physics: str = "mujoco",
+    physics_device: str | None = None,
+    physics_options: dict[str, Any] | None = None,
 ) -> Sb3VecEnv:
     """The training ``VecEnv`` of an environment target: :class:`Sb3VecEnv` over the batched core (on backend
-    ``physics`` at ``physics_device``)."""
-    return Sb3VecEnv(make_core(target.config, num_envs, seed, physics, physics_device))
+    ``physics`` at ``physics_device`` with ``physics_options``)."""
+    return Sb3VecEnv(make_core(target.config, num_envs, seed, physics, physics_device, physics_options))
 
 
 def make_sb3_env(
@@ -172,14 +177,16 @@ def make_sb3_env(
     seed: int | None = None,
     physics: str = "mujoco",
     physics_device: str | None = None,
+    physics_options: dict[str, Any] | None = None,
     **env_options: Any,
 ) -> Sb3VecEnv:
     """A Stable-Baselines3 ``VecEnv`` of ``num_envs`` environments of a margin_rl ANYmal id, over the native
     batched simulation (much faster than SB3's ``DummyVecEnv`` of single environments).
 
     ``env_options``: any :class:`~margin_rl.envs.config.EnvConfig` field (e.g. ``margin_weight=0.2``,
-    ``reward_params={"alive_bonus": 0.1}``, ``margin="analytic"``); ``seed`` seeds the initial states; ``physics``
-    and ``physics_device``: the simulator (see :func:`~margin_rl.train.backends.rsl.make_rsl_env`). Example::
+    ``reward_params={"alive_bonus": 0.1}``, ``margin="analytic"``); ``seed`` seeds the initial states; ``physics``,
+    ``physics_device`` and ``physics_options``: the simulator (see :func:`~margin_rl.train.backends.rsl.make_rsl_env`).
+    Example::
 
         from stable_baselines3 import PPO
         from margin_rl.train import make_sb3_env
@@ -195,7 +202,7 @@ def make_sb3_env(
         TypeError: an option that is not an EnvConfig field, or a badly typed value.
     """
     config = anymal_config(env_id, env_options, "make_sb3_env")
-    return Sb3VecEnv(make_core(config, num_envs, seed, physics, physics_device))
+    return Sb3VecEnv(make_core(config, num_envs, seed, physics, physics_device, physics_options))
 
 
 def warn_unpickling(path: str | Path) -> None:

@@ -46,7 +46,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from margin_rl.envs.backends import PHYSICS_BACKENDS
+from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.core import check_margin_runs_on
 from margin_rl.envs.physics import usable_cores
@@ -369,6 +369,7 @@ def train(
     update_threads: int | None = None,
     physics: str = "mujoco",
     physics_device: str | None = None,
+    physics_options: dict[str, Any] | None = None,
 ) -> TrainResult:
     """Train (or, with ``resume``, continue from the latest checkpoint of ``run_dir``) one PPO run.
 
@@ -376,8 +377,8 @@ def train(
     steps)`` is called after every checkpoint. ``threads``: torch intra-op threads while training (see
     :func:`margin_rl.train.runs.torch_threads`; None keeps torch's setting); ``update_threads``: torch threads
     inside the PPO update of either backend (None: one per core this process may run on, :func:`usable_cores`).
-    Threads change the speed, not what PPO computes. ``physics``, ``physics_device``: the simulator
-    (:func:`margin_rl.envs.backends.make_physics`), chosen per call like the threads: not part of the run's
+    Threads change the speed, not what PPO computes. ``physics``, ``physics_device``, ``physics_options``: the
+    simulator (:func:`margin_rl.envs.backends.make_physics`), chosen per call like the threads: not part of the run's
     config, so a run trained on one backend resumes and evaluates on another. Raises FileExistsError when
     ``run_dir`` already holds checkpoints and ``resume`` is False, ValueError when the environment cannot be built
     (:func:`check_environment`).
@@ -410,7 +411,7 @@ def train(
     t0 = time.perf_counter()
     try:
         with graceful_stop(stop, verbose=True), torch_threads(threads):
-            simulator = (physics, physics_device)
+            simulator = PhysicsChoice(physics, physics_device, dict(physics_options or {}))
             steps, stopped, torchscript = _run_backend(spec, run_dir, checkpoint, hooks, update_threads, simulator)
     finally:
         bar.close()
@@ -437,10 +438,11 @@ def _run_backend(
     run_dir: Path,
     checkpoint: Path | None,
     hooks: RunHooks,
-    update_threads: int | None = None,
-    simulator: tuple[str, str | None] = ("mujoco", None),
+    update_threads: int | None,
+    simulator: PhysicsChoice,
 ) -> tuple[int, bool, Any]:
-    """Seed, build the backend's vector environment over the spec's environment, and hand over to the backend."""
+    """Seed, build the backend's vector environment over the spec's environment on ``simulator``, and hand over to
+    the backend."""
     torch.manual_seed(spec.seed)
     np.random.seed(spec.seed % 2**32)
     final = run_dir / final_model_name(spec.backend)
@@ -448,10 +450,10 @@ def _run_backend(
     learner = {"init_from": spec.init_from, "update_threads": threads}
     if isinstance(spec.ppo, RslPPOConfig):
         # The env's tensors go to the learner's device: with the physics there too (Warp on that GPU), no copy at all.
-        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed, spec.device, *simulator)
+        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed, spec.device, *simulator.arguments)
         cfg = spec.backend_config(run_dir.name)
         return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final, **learner)
-    venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed, *simulator)
+    venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed, *simulator.arguments)
     total = spec.total_iterations * spec.steps_per_iteration
     every = spec.checkpoint_every
     return train_sb3(venv, spec.ppo, run_dir, spec.seed, spec.device, total, every, checkpoint, hooks, final, **learner)
@@ -523,13 +525,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--physics",
         choices=PHYSICS_BACKENDS,
         default=PHYSICS_BACKENDS[0],
-        help="simulator: mujoco (mujoco.batch, the default) or warp (MuJoCo Warp, the gpu extra; on Warp's CPU "
-        "device for now). Not part of the run's config: a run resumes and evaluates on either",
+        help="simulator: mujoco (mujoco.batch, the default) or warp (MuJoCo Warp, the gpu extra). Not part of the "
+        "run's config: a run resumes and evaluates on either",
     )
     parser.add_argument(
         "--physics-device",
         default=None,
         help="the simulator's device for warp: cuda:0, ... or cpu (default: the first GPU)",
+    )
+    parser.add_argument(
+        "--physics-option",
+        action="append",
+        metavar="KEY=VALUE",
+        help="a setting of the simulator (warp: nconmax, njmax; repeatable), e.g. --physics-option nconmax=96",
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="also print the backend's own logs")
@@ -640,6 +648,7 @@ def main(argv: list[str] | None = None) -> int:
             update_threads=args.update_threads,
             physics=args.physics,
             physics_device=args.physics_device,
+            physics_options=parse_assignments(args.physics_option, "--physics-option"),
         )
     except FileExistsError as exc:
         parser.error(str(exc))

@@ -218,3 +218,22 @@ def test_a_run_trained_on_warp_resumes_on_mujoco(tmp_path: Path, toy_weights: st
     with pytest.raises(SystemExit):
         train_module.main(["--margin", "analytic", "--run-dir", str(tmp_path / "lp"), "--no-progress", *warp])
     assert not (tmp_path / "lp").exists()
+
+
+def test_a_buffer_overflow_stops_a_warp_run_and_keeps_its_last_checkpoint(tmp_path: Path, toy_weights: str) -> None:
+    """--physics-option reaches the Warp backend: buffers too small for the landing robots stop the resumed run with
+    PhysicsOverflowError naming the settings to raise; the checkpoint before it stays, and the run resumes from it
+    with the default buffers."""
+    require_mujoco_warp()
+    from margin_rl.envs.physics_warp import PhysicsOverflowError
+
+    run_dir = tmp_path / "run"
+    warp = ["--physics", "warp", "--physics-device", "cpu"]
+    assert train_module.main([*tiny_args("rsl", run_dir, toy_weights, total=192, every=192), *warp]) == 0
+    kept = latest_checkpoint(run_dir)
+    small = ["--physics-option", "nconmax=1", "--physics-option", "njmax=4"]
+    with pytest.raises(PhysicsOverflowError, match=r"nconmax=1 .*njmax=4.*physics_options"):
+        train_module.main(["--resume", str(run_dir), "--total-steps", "384", "--no-progress", *warp, *small])
+    assert latest_checkpoint(run_dir) == kept and kept.is_file()
+    assert train_module.main(["--resume", str(run_dir), "--total-steps", "384", "--no-progress", *warp]) == 0
+    assert json.loads((run_dir / "progress.json").read_text())["env_steps"] == 384

@@ -28,6 +28,11 @@ observation is returned separately). Robot names (bodies, sensors, keyframe, the
    reported as ``info["termination_<cause>"]``) and truncation at the episode length, ``_info``;
 8. observations and the same-step autoreset of finished environments.
 
+**Where it computes.** In the kind of its physics' live arrays (:mod:`margin_rl.arrays`): numpy on the host beside
+``mujoco.batch``, torch tensors on the physics' device beside Warp, float64 either way; its random draws come from a
+generator of the same kind (numpy's, or :class:`~margin_rl.arrays.TorchRandom` on the device), so the two backends
+draw different numbers from one seed. Every method takes numpy or the core's kind and answers in the core's kind.
+
 A core pickles (and deep-copies): it is rebuilt from its config and terrain, and given back its state (the
 physics' integration state and per-environment model fields, the random generator, commands, filters, pushes,
 episode counters), so that the copy steps to the same numbers as the original.
@@ -219,8 +224,9 @@ class AnymalCore:
         return like(value, self.physics.qpos, dtype)
 
     def _index(self, values: Any) -> Any:
-        """Integer indices (environments, sites, sensors) as the core's int64 array."""
-        return self._array(np.asarray(values, dtype=np.int64))
+        """Integer indices (environments, sites, sensors; a list, numpy or a tensor on any device) as the core's int64
+        array."""
+        return self._array(values, self.xp.int64)
 
     def _cast(self, value: Any, target: Any) -> Any:
         """``value`` in ``target``'s dtype, to be written into it (a no-op where they agree, e.g. numpy float64)."""
@@ -353,8 +359,10 @@ class AnymalCore:
         )
 
     # ------------------------------------------------------------------ step
-    def step(self, actions: np.ndarray) -> StepOutput:
-        """Advance every environment by one policy step (the stages of the module docstring)."""
+    def step(self, actions: Any) -> StepOutput:
+        """Advance every environment by one policy step (the stages of the module docstring). ``actions`` (N, 12):
+        numpy or a tensor (moved to the core's device); the output is in the core's kind
+        (:meth:`StepOutput.to_numpy` for the host)."""
         cfg = self.config
         action = self._actuate(actions)
         diverged = self._simulate()
@@ -601,14 +609,15 @@ class AnymalCore:
     def _start_random_pushes(self, rnd: RandomizationConfig) -> None:
         self._next_push -= 1
         start = self._next_push <= 0
-        if bool(self.xp.any(start)):
-            xp = self.xp
-            angle = self.rng.uniform(0, 2 * np.pi, size=int(xp.sum(start)))
+        xp = self.xp
+        count = int(xp.sum(start))  # on a device: one read, for the number of draws
+        if count:
+            angle = self.rng.uniform(0, 2 * np.pi, size=count)
             self._push_force[start] = rnd.push_force * xp.stack(
                 [xp.cos(angle), xp.sin(angle), xp.zeros_like(angle)], axis=1
             )
             self._push_steps_left[start] = self.push_steps(rnd.push_duration_s)
-            self._next_push[start] = self.rng.exponential(rnd.push_interval_s / self.dt, size=int(start.sum()))
+            self._next_push[start] = self.rng.exponential(rnd.push_interval_s / self.dt, size=count)
 
     # ------------------------------------------------------------------ observations
     def _observe(self, values: dict[str, np.ndarray]) -> np.ndarray:

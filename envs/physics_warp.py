@@ -13,8 +13,10 @@ stated where the core or a user meets it):
 * **CUDA graphs on a GPU.** There the decimated step (``nstep`` physics steps and the forward pass) is captured
   once per ``nstep`` as a CUDA graph and replayed (eager launching is an order of magnitude slower): the
   graph keeps the arrays it was captured with, and this backend never replaces one (per-world fields and resets
-  write in place). Warp runs on torch's current stream, so the core's torch operations and the kernels are
-  ordered. On the CPU device every call launches eagerly (graphs are CUDA-only).
+  write in place). The kernels run on Warp's own stream of the device, a blocking stream: it synchronises with
+  CUDA's default stream, where torch runs the core's operations unless told otherwise, so the two are ordered
+  without an explicit wait (and a graph cannot be captured on torch's default stream). On the CPU device every call
+  launches eagerly (graphs are CUDA-only).
 * **Buffers of a stated size.** Warp allocates its contact and constraint buffers once (MuJoCo grows its arena).
   :func:`contact_budget` sizes them from the model; a step that needs more sets ``Data.overflow``, which this
   backend ORs into a flag of its own on the device after every step (kept across resets, which clear
@@ -176,11 +178,8 @@ class WarpPhysics(ModelConstants):
         self._per_env_fields = {name: view(getattr(self._model, name)) for name in PER_ENV_FIELDS}
 
     def _on_device(self) -> Any:
-        """The scope of every launch: Warp's device; on a GPU, torch's current stream there (ordered with the core's
-        torch operations)."""
-        if self.device == "cpu":
-            return wp.ScopedDevice(self.device)
-        return wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(self.device)))
+        """The scope of every launch: Warp's device, on its own (blocking) stream there (module docstring)."""
+        return wp.ScopedDevice(self.device)
 
     # ------------------------------------------------------------------ per-environment model fields
     def per_env_field(self, name: str) -> torch.Tensor:

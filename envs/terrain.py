@@ -3,8 +3,9 @@
 The rough terrain is a square heightfield of tiles, each of one type drawn from the paper's scenes
 (bricks, stairs up and down, inclines, side steps, scattered obstacles), with heights of 6-18 cm as in
 Fig. 5/8, and a flat pad at every tile centre where robots spawn. MuJoCo collides with the same grid
-(an ``hfield`` geom); :meth:`Terrain.height` and :meth:`Terrain.normal` query it in numpy, vectorised,
-for the contact normals in lambda and for spawning.
+(an ``hfield`` geom); :meth:`Terrain.height` and :meth:`Terrain.normal` query the same surface (MuJoCo's triangles),
+vectorised over numpy arrays or torch tensors, for the contact normals in lambda, the terminations, the privileged
+heights and spawning.
 
 Every tile meets its neighbours at the base level on its border, and nowhere does the ground jump by more than one
 step (``step_height``'s upper bound): stairs and inclines are square pyramids, rising (``*_up``) or falling
@@ -102,7 +103,9 @@ class Terrain:
         return self._arrays_like(reference)[1]
 
     def height(self, xy: Any) -> Any:
-        """Ground height [m] under points (..., 2), bilinear in the grid (0 for flat ground)."""
+        """Ground height [m] under points (..., 2) (0 for flat ground): the surface MuJoCo collides with, linear on
+        the two triangles each grid cell is split into along its (r, c)-(r+1, c+1) diagonal (tested against
+        ``mj_ray`` on the heightfield geom)."""
         xp = namespace(xy)
         xy = xp.astype(xp.asarray(xy), xp.float64, copy=False)
         if self.heights is None:
@@ -113,12 +116,9 @@ class Terrain:
         v = xp.clip((xy[..., 1] - self.origin[1]) / self.resolution, 0, n - 1.000001)
         c0, r0 = xp.astype(xp.floor(u), xp.int64), xp.astype(xp.floor(v), xp.int64)
         fu, fv = u - c0, v - r0
-        return (
-            h[r0, c0] * (1 - fu) * (1 - fv)
-            + h[r0, c0 + 1] * fu * (1 - fv)
-            + h[r0 + 1, c0] * (1 - fu) * fv
-            + h[r0 + 1, c0 + 1] * fu * fv
-        )
+        h00, h01, h10, h11 = h[r0, c0], h[r0, c0 + 1], h[r0 + 1, c0], h[r0 + 1, c0 + 1]
+        # Triangle (00, 01, 11) where fu >= fv, triangle (00, 10, 11) elsewhere.
+        return xp.where(fu >= fv, h00 + fu * (h01 - h00) + fv * (h11 - h01), h00 + fv * (h10 - h00) + fu * (h11 - h10))
 
     def normal(self, xy: Any) -> Any:
         """Unit terrain normals (..., 3) under points (..., 2), from central differences of the height."""

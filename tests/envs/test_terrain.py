@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from margin_rl.envs.terrain import TILE_TYPES, TerrainConfig, rough_terrain
+from margin_rl.envs.terrain import TILE_TYPES, Terrain, TerrainConfig, rough_terrain
 
 # 3 x 3 tiles of 4 m: every tile type appears (8 types, 9 tiles), on a 241 x 241 grid that builds in milliseconds.
 SMALL = {"size": 12.0, "tile": 4.0, "border": 0.0}
@@ -83,3 +83,42 @@ def test_same_seed_same_grid_and_every_tile_type_used() -> None:
     np.testing.assert_array_equal(a.heights, b.heights)
     assert not np.array_equal(a.heights, rough_terrain(config, seed=6).heights)
     assert len(a.spawn_points) == 9 >= len(TILE_TYPES)
+
+
+def test_heights_are_the_surface_mujoco_collides_with() -> None:
+    """Terrain.height against MuJoCo's own ray casts down onto the heightfield geom, at random points over the tiles
+    (risers included): equal to the heightfield's float32 storage (MuJoCo splits every cell along one diagonal; a
+    bilinear interpolation differs by up to 3 cm on risers). The normals are those of the same surface: on a planar
+    incline the central-difference normal is the plane's."""
+    import mujoco
+
+    from margin_rl.envs.config import EnvConfig
+    from margin_rl.envs.scene import build_model
+    from margin_rl.robot import load_robot
+
+    config = EnvConfig(robot="anymal_c", terrain="rough", terrain_config=TerrainConfig(**SMALL))
+    terrain = rough_terrain(config.terrain_config, seed=3)
+    model = build_model(load_robot("anymal_c"), terrain, config.terrain_config)
+    data = mujoco.MjData(model)
+    data.qpos[:3] = [0.0, 0.0, 10.0]  # the robot well above the rays' start
+    mujoco.mj_forward(model, data)
+    floor, hit = model.geom("floor").id, np.zeros(1, dtype=np.int32)
+    half = (terrain.heights.shape[0] - 1) * terrain.resolution / 2
+    points = np.random.default_rng(0).uniform(-half + 0.01, half - 0.01, size=(2000, 2))
+    ray, hits = np.empty(len(points)), np.empty(len(points), dtype=int)
+    for i, (x, y) in enumerate(points):
+        ray[i] = 5.0 - mujoco.mj_ray(model, data, np.array([x, y, 5.0]), np.array([0.0, 0.0, -1.0]), None, 1, -1, hit)
+        hits[i] = hit[0]
+    assert np.all(hits == floor)
+    heights = terrain.height(points)
+    assert np.ptp(heights) > 0.1  # the points met the tiles, not only the base level
+    np.testing.assert_allclose(heights, ray, atol=config.terrain_config.max_height * 2**-22)  # float32 storage
+
+    slope = 0.2
+    x = (np.arange(41) - 20) * 0.05
+    incline = Terrain(heights=1.0 + slope * np.tile(x, (41, 1)), origin=(-1.0, -1.0), resolution=0.05,
+                      spawn_points=np.zeros((1, 3)))  # fmt: skip
+    inside = np.random.default_rng(1).uniform(-0.8, 0.8, size=(50, 2))
+    np.testing.assert_allclose(incline.height(inside), 1.0 + slope * inside[:, 0], atol=1e-12)
+    np.testing.assert_allclose(incline.normal(inside), np.tile([-slope, 0.0, 1.0] / np.hypot(slope, 1.0), (50, 1)),
+                               atol=1e-12)  # fmt: skip

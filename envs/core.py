@@ -195,6 +195,8 @@ class AnymalCore:
         # step is bound by kernel launches, not by memory traffic).
         self.xp = namespace(physics.qpos)
         self.device = device_of(physics.qpos)
+        # Reading a device's buffer flags waits for it: there, once per DEVICE_CHECK_STEPS; on the host, every step.
+        self._check_every = 1 if str(self.device) == "cpu" else DEVICE_CHECK_STEPS
         self._steps_since_check = 0
         self.dt = float(physics.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
@@ -457,7 +459,7 @@ class AnymalCore:
         """The backend's buffer check (dropped contacts would make every later step of a world wrong): every step
         on the host, every :data:`DEVICE_CHECK_STEPS` steps on a device (it reads the device's flags)."""
         self._steps_since_check += 1
-        if str(self.device) == "cpu" or self._steps_since_check >= DEVICE_CHECK_STEPS:
+        if self._steps_since_check >= self._check_every:
             self._steps_since_check = 0
             self.physics.check_overflow()
 

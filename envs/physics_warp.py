@@ -193,9 +193,12 @@ class WarpPhysics(ModelConstants):
         return self._per_env_fields[name]
 
     def set_const(self) -> None:
-        """Recompute the constants derived from the per-world model fields (``mujoco_warp.set_const``)."""
+        """Recompute the constants derived from the per-world model fields (``mujoco_warp.set_const``); the step's
+        CUDA graphs are captured again at the next step, in case a model array was re-allocated (a graph keeps the
+        arrays it was captured with)."""
         with self._on_device():
             mjw.set_const(self._model, self._data)
+        self._graphs.clear()
 
     # ------------------------------------------------------------------ operations
     def reset(self, ids: np.ndarray, keyframe: int) -> None:

@@ -68,18 +68,19 @@ def reward_terms(info: Mapping[str, np.ndarray]) -> tuple[str, ...]:
 class EpisodeStatistics:
     """Running per-environment episode sums; :meth:`update` returns the metrics of the episodes that ended.
 
-    The sums live where the environment's arrays do (``like``: an array of the core, e.g. ``core.episode_step``:
+    The sums live where the environment's arrays do (``reference``: an array of the core, e.g. ``core.episode_step``:
     numpy on the host, torch tensors on the physics' device), so that a step adds to them without leaving the
     device; the metrics of finished episodes come back as numpy.
     """
 
-    def __init__(self, num_envs: int, dt: float, warmup_steps: int = 0, like: Any = None) -> None:
+    def __init__(self, num_envs: int, dt: float, warmup_steps: int = 0, reference: Any = None) -> None:
         """``dt``: policy step [s]; ``warmup_steps``: steps at the start of each episode left out of the
-        acceleration statistics; ``like``: an array of the kind and device the step outputs come in (None: numpy)."""
+        acceleration statistics; ``reference``: an array of the kind and device the step outputs come in (None:
+        numpy)."""
         self.num_envs, self.dt, self.warmup_steps = num_envs, float(dt), int(warmup_steps)
         self.terms: tuple[str, ...] = ()
-        xp = self._xp = namespace(np.zeros(0) if like is None else like)
-        self._device = "cpu" if like is None else device_of(like)
+        xp = self._xp = namespace(np.zeros(0) if reference is None else reference)
+        self._device = "cpu" if reference is None else device_of(reference)
         n = num_envs
         self._return = self._zeros(n)
         self._length = self._zeros(n, dtype=xp.int64)

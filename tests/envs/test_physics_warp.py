@@ -322,3 +322,19 @@ def test_rsl_rl_gets_the_physics_tensors_without_a_copy() -> None:
     observations, rewards, dones, extras = env.step(torch.zeros(3, 12))
     assert observations["policy"].shape == (3, 48) and rewards.dtype == torch.float32 and dones.shape == (3,)
     assert extras["time_outs"].device == rewards.device == torch.device("cpu")
+
+
+def test_an_overflow_between_two_device_checks_is_kept_until_the_next() -> None:
+    """On a GPU the core reads the buffer flags once per DEVICE_CHECK_STEPS steps (here forced on Warp's CPU device):
+    an overflow in between is not lost, it is raised at the next check."""
+    from margin_rl.envs.core import DEVICE_CHECK_STEPS
+
+    config = EnvConfig(robot="anymal_c", terrain="flat")
+    core = AnymalCore(config, num_envs=2, seed=0, physics_options={"nconmax": 1, "njmax": 4}, **WARP_CPU)
+    core._check_every = DEVICE_CHECK_STEPS  # as on a GPU
+    core.reset(seed=0)
+    for _ in range(DEVICE_CHECK_STEPS - 1):  # the feet land within these steps: the buffers overflow
+        core.step(np.zeros((2, 12)))
+    assert int(core.physics._overflow_seen.max()) != 0  # recorded on the device, not yet read
+    with pytest.raises(PhysicsOverflowError, match="nconmax=1"):
+        core.step(np.zeros((2, 12)))

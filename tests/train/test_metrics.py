@@ -35,7 +35,7 @@ def step_info(rng: np.random.Generator) -> dict[str, np.ndarray]:
 def test_episode_statistics_on_tensors_equal_numpys(seed: int, warmup: int) -> None:
     rng = np.random.default_rng(seed)
     host = EpisodeStatistics(N, 0.02, warmup_steps=warmup)
-    device = EpisodeStatistics(N, 0.02, warmup_steps=warmup, like=torch.zeros(1))
+    device = EpisodeStatistics(N, 0.02, warmup_steps=warmup, reference=torch.zeros(1))
     ended = 0
     for _ in range(25):
         info, reward = step_info(rng), rng.normal(size=N)

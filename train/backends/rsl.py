@@ -72,7 +72,7 @@ class RslVecEnv(VecEnv):
         self.device = torch.device(device)
         self.cfg: dict[str, Any] = to_dict(core.config)
         self.privileged = bool(core.config.privileged_observations)
-        self.stats = EpisodeStatistics(core.num_envs, core.dt, like=core.episode_step)  # sums where the core is
+        self.stats = EpisodeStatistics(core.num_envs, core.dt, reference=core.episode_step)  # sums where the core is
         self.core.reset()
         self._obs = self._observations(core.observe_all())
 

@@ -25,8 +25,10 @@ usual locomotion regularisers (torques, action rate, orientation, feet air time,
   expected shape. ``step()`` before the first ``reset()`` raises ``gymnasium.error.ResetNeeded``.
 * Observation (48, float32, :data:`margin_rl.envs.observations.POLICY_OBSERVATIONS`, see
   ``observation_structure``): base linear and angular velocity (base frame), projected gravity, command,
-  joint positions relative to standing, joint velocities, previous action. Its bounds are ±inf: velocities
-  have no physical bound short of the divergence check, and Gymnasium's MuJoCo robots do the same.
+  joint positions relative to standing, joint velocities, previous action; with ``height_scan=True`` (235) also
+  the terrain heights on a 1.6 m x 1.0 m grid around the base (:data:`~margin_rl.envs.observations.HEIGHT_SCAN`).
+  Its bounds are ±inf: velocities have no physical bound short of the divergence check, and Gymnasium's MuJoCo
+  robots do the same.
 * Episode: ``EnvConfig.episode_length_s`` (20 s = 1000 steps by default), truncated by the environment
   itself (the ids carry no TimeLimit, so ``gymnasium.make(id, episode_length_s=10)`` gives 500-step
   episodes; ``max_episode_steps=`` adds a TimeLimit as usual); terminated when any of the named causes of
@@ -93,7 +95,7 @@ from margin_rl.arrays import to_numpy
 from margin_rl.envs.backends import PHYSICS_BACKENDS
 from margin_rl.envs.config import EnvConfig, check_int
 from margin_rl.envs.core import ACTION_BOUND, AnymalCore
-from margin_rl.envs.observations import observation_size, observation_structure
+from margin_rl.envs.observations import observation_size, observation_structure, policy_observations
 from margin_rl.robot import mjcf_names
 
 ACTION_SIZE = 12
@@ -314,9 +316,10 @@ class AnymalEnv(gymnasium.Env):
             physics_options=physics_options,
         )
         self.metadata = {**self.metadata, "render_modes": available_render_modes(), "render_fps": round(1.0 / self.dt)}
-        self.observation_space = spaces.Box(-np.inf, np.inf, (observation_size(),), np.float32)
+        terms = policy_observations(self.core.config.height_scan)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (observation_size(terms),), np.float32)
         self.action_space = spaces.Box(-ACTION_BOUND, ACTION_BOUND, (ACTION_SIZE,), np.float32)
-        self.observation_structure = observation_structure()
+        self.observation_structure = observation_structure(terms)
         self.render_mode, self.width, self.height = render_mode, width, height
         self._frames = FrameRenderer(self.core, width, height)
         self._viewer = None

@@ -389,6 +389,7 @@ class EnvConfig:
     # lambda"); runs recorded before v2 keep their 0.0 in their config.json.
     acceleration_filter: float = 0.5
     privileged_observations: bool = False  # add the critic group (terrain heights, friction, margin)
+    height_scan: bool = False  # add the actor's terrain height scan (observations.HEIGHT_SCAN): perceptive policies
     command: CommandConfig = field(default_factory=CommandConfig)
     randomization: RandomizationConfig = field(default_factory=RandomizationConfig)
     termination: TerminationConfig = field(default_factory=TerminationConfig)
@@ -434,11 +435,10 @@ class EnvConfig:
             max_open=True,
             hint="EMA factor, 0: no filter",
         )
-        if not isinstance(self.privileged_observations, (bool, np.bool_)):
-            raise TypeError(
-                f"{where}.privileged_observations must be True or False, got {self.privileged_observations!r} "
-                f"({type(self.privileged_observations).__name__})"
-            )
+        for name in ("privileged_observations", "height_scan"):
+            value = getattr(self, name)
+            if not isinstance(value, (bool, np.bool_)):
+                raise TypeError(f"{where}.{name} must be True or False, got {value!r} ({type(value).__name__})")
 
     def replace(self, **changes: object) -> EnvConfig:
         """A copy with some fields changed (configs are never mutated); a mapping for ``reward_params``

@@ -52,9 +52,11 @@ from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.margin_kinds import MARGIN_KINDS, make_margin_function
 from margin_rl.envs.observations import (
     FOOT_HEIGHT_OFFSETS,
-    POLICY_OBSERVATIONS,
+    HEIGHT_SCAN_CLIP,
+    HEIGHT_SCAN_POINTS,
     PRIVILEGED_OBSERVATIONS,
     assemble,
+    policy_observations,
 )
 from margin_rl.envs.physics import PhysicsBackend
 from margin_rl.envs.rewards import compute_rewards
@@ -217,7 +219,10 @@ class AnymalCore:
         self._friction = physics.per_env_field("geom_friction")
         self.mu = self.xp.full(num_envs, physics.geom_friction(self._floor), dtype=self.xp.float64, device=self.device)
         self._margin_fn = make_margin_function(config.margin, self.robot, config.margin_weights, MARGIN_CLIP[0])
-        self.observation_size = sum(t.size for t in POLICY_OBSERVATIONS)
+        self._policy_terms = policy_observations(config.height_scan)
+        self.observation_size = sum(t.size for t in self._policy_terms)
+        scan = np.array(HEIGHT_SCAN_POINTS)
+        self._scan_offsets = self._array(np.column_stack([scan, np.zeros(len(scan))]))  # (P, 3) in the heading frame
         self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
 
     # ------------------------------------------------------------------ arrays
@@ -256,7 +261,8 @@ class AnymalCore:
             setattr(self, name, value)
 
     BUILD_FIELDS: tuple[str, ...] = (
-        "robot", "terrain", "terrain_config", "decimation", "episode_length_s", "margin", "margin_weights"
+        "robot", "terrain", "terrain_config", "decimation", "episode_length_s", "margin", "margin_weights",
+        "height_scan",
     )  # fmt: skip
     """EnvConfig fields a core is built from (model, time step, episode length, margin model): fixed for its life."""
 
@@ -624,17 +630,17 @@ class AnymalCore:
     # ------------------------------------------------------------------ observations
     def _observe(self, values: dict[str, np.ndarray]) -> np.ndarray:
         noise = self.config.randomization.observation_noise
-        return assemble({**values, "last_action": self.last_action}, POLICY_OBSERVATIONS, noise, self.rng)
+        return assemble({**values, "last_action": self.last_action}, self._policy_terms, noise, self.rng)
 
     def _observe_ids(self, ids: np.ndarray) -> np.ndarray:
         values = {**self._policy_values(self._read(ids), ids), "last_action": self.last_action[ids]}
         noise = self.config.randomization.observation_noise
-        return assemble(values, POLICY_OBSERVATIONS, noise, self.rng)
+        return assemble(values, self._policy_terms, noise, self.rng)
 
     def _policy_values(self, state: SimulationState, ids: np.ndarray | slice) -> dict[str, np.ndarray]:
         """The robot-state terms of the observation (and the rewards), from a state read of ``ids``."""
         R = state.base_rot
-        return {
+        values = {
             "base_lin_vel": self.xp.einsum("nji,nj->ni", R, state.lin_vel_world),  # base frame
             "base_ang_vel": state.ang_vel_body,
             "projected_gravity": -R[:, 2, :],
@@ -642,6 +648,19 @@ class AnymalCore:
             "joint_pos": state.joint_pos - self._standing_joint_pos,
             "joint_vel": state.joint_vel,
         }
+        if self.config.height_scan:
+            values["height_scan"] = self._height_scan(state)
+        return values
+
+    def _height_scan(self, state: SimulationState) -> Any:
+        """(N, P) base height above the terrain at the scan points (:data:`HEIGHT_SCAN_POINTS`, turned with the base's
+        yaw) minus the robot's standing height (the MJCF keyframe's), clipped to +-HEIGHT_SCAN_CLIP [m]."""
+        xp = self.xp
+        points = state.base_pos[:, None, :] + xp.einsum(
+            "nij,pj->npi", heading_rotation(state.base_rot), self._scan_offsets
+        )
+        below = state.base_pos[:, None, 2] - self.terrain.height(points[..., :2]) - self.robot.standing_height
+        return xp.clip(below, -HEIGHT_SCAN_CLIP, HEIGHT_SCAN_CLIP)
 
     def observe_all(self) -> np.ndarray:
         """Policy observations of every environment (after :meth:`reset`)."""

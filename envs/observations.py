@@ -1,6 +1,7 @@
 """The observation layout, declared once: names, sizes, scales and noise levels.
 
-The policy observation is the concatenation of :data:`POLICY_OBSERVATIONS` in order, each multiplied by
+The policy observation is the concatenation of :data:`POLICY_OBSERVATIONS` in order (and, with
+``EnvConfig.height_scan``, :data:`HEIGHT_SCAN` after them: :func:`policy_observations`), each multiplied by
 its scale (legged_gym's normalisation) and perturbed by uniform noise of half-width
 ``noise * scale * RandomizationConfig.observation_noise``. Frames: velocities in the base frame,
 gravity projected into the base frame, joint positions relative to the standing keyframe.
@@ -34,6 +35,27 @@ POLICY_OBSERVATIONS: tuple[ObservationTerm, ...] = (
     ObservationTerm("last_action", 12, 1.0, 0.0, "previous action"),
 )
 
+HEIGHT_SCAN_POINTS: tuple[tuple[float, float], ...] = tuple(
+    (round(0.1 * i, 10), round(0.1 * j, 10)) for i in range(-8, 9) for j in range(-5, 6)
+)
+"""Where the actor's height scan samples the terrain: a 1.6 m x 1.0 m grid at 0.1 m (17 x 11 points, x-major) in the
+heading frame (x forwards, y to the left, yaw of the base only), centred on the base: the field's grid for ANYmal
+(legged_gym's, Isaac Lab's)."""
+
+HEIGHT_SCAN_CLIP = 1.0
+"""The scan's values are clipped to [-HEIGHT_SCAN_CLIP, HEIGHT_SCAN_CLIP] [m] (a cliff or a wall reads as one metre)."""
+
+HEIGHT_SCAN = ObservationTerm(
+    "height_scan",
+    len(HEIGHT_SCAN_POINTS),
+    5.0,
+    0.1,
+    "base height above the terrain at each scan point minus the standing height, clipped to +-1 m [m]",
+)
+"""The optional terrain-perception group of the actor (``EnvConfig.height_scan``): 0 everywhere for a robot standing
+on flat ground, positive where the ground is lower than under a standing robot, negative where it is higher. Noise:
++-0.1 m (uniform, the field's default), scaled by ``RandomizationConfig.observation_noise`` like every term."""
+
 FOOT_HEIGHT_OFFSETS: tuple[tuple[float, float], ...] = tuple(
     (dx, dy) for dx in (-0.1, 0.0, 0.1) for dy in (-0.1, 0.0, 0.1)
 )
@@ -50,6 +72,12 @@ PRIVILEGED_OBSERVATIONS: tuple[ObservationTerm, ...] = (
     ObservationTerm("friction", 1, 1.0, 0.0, "terrain friction coefficient"),
     ObservationTerm("margin", 1, 10.0, 0.0, "stability margin of the current state [m]"),
 )
+
+
+def policy_observations(height_scan: bool = False) -> tuple[ObservationTerm, ...]:
+    """The actor's observation terms in order: :data:`POLICY_OBSERVATIONS`, then :data:`HEIGHT_SCAN` when asked
+    (``EnvConfig.height_scan``)."""
+    return POLICY_OBSERVATIONS + ((HEIGHT_SCAN,) if height_scan else ())
 
 
 def observation_structure(terms: tuple[ObservationTerm, ...] = POLICY_OBSERVATIONS) -> dict[str, int]:

@@ -68,7 +68,7 @@ from margin_rl.envs.anymal import (
 from margin_rl.envs.backends import PHYSICS_BACKENDS
 from margin_rl.envs.config import EnvConfig, check_int
 from margin_rl.envs.core import ACTION_BOUND, AnymalCore
-from margin_rl.envs.observations import observation_size, observation_structure
+from margin_rl.envs.observations import observation_size, observation_structure, policy_observations
 
 AUTORESET_MODES: tuple[AutoresetMode, ...] = (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)
 """The autoreset modes :class:`AnymalVectorEnv` offers; the first is the default (see the module docstring)."""
@@ -177,11 +177,12 @@ class AnymalVectorEnv(VectorEnv):
         self.num_envs = num_envs
         self.render_mode, self.width, self.height = render_mode, width, height
         self.metadata = {**self.metadata, "render_fps": round(1.0 / self.dt), "autoreset_mode": self.autoreset_mode}
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (observation_size(),), np.float32)
+        terms = policy_observations(self.core.config.height_scan)
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, (observation_size(terms),), np.float32)
         self.single_action_space = spaces.Box(-ACTION_BOUND, ACTION_BOUND, (ACTION_SIZE,), np.float32)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self.observation_structure = observation_structure()
+        self.observation_structure = observation_structure(terms)
         self._frames = FrameRenderer(self.core, width, height)
         self._needs_reset = True
         self._autoreset_envs = np.zeros(num_envs, dtype=bool)  # NEXT_STEP: reset these at the next step

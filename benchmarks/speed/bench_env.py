@@ -2,7 +2,7 @@
 
 Usage:
     python benchmarks/speed/bench_env.py [--env margin_rl/AnymalB-v1] [--num-envs 64] [--steps 300] [--rounds 5]
-        [--warp-cpu] [--json PATH]
+        [--warp-cpu] [--height-scan] [--json PATH]
 
 Five configurations, measured in interleaved rounds in one run (round r measures all of them, one after the
 other), with the median over rounds and the ratios of medians printed as a Markdown table:
@@ -15,7 +15,8 @@ other), with the median over rounds and the ratios of medians printed as a Markd
 
 The last raw row is the physics cost of exactly what the env steps; the env's Python work (lambda, margin,
 rewards, observations, resets) is the difference. ``--warp-cpu`` adds the env with the learned margin on the MuJoCo
-Warp backend on Warp's CPU device (``physics="warp", physics_device="cpu"``; its kernels compile on first use).
+Warp backend on Warp's CPU device (``physics="warp", physics_device="cpu"``; its kernels compile on first use);
+``--height-scan`` the env with the learned margin and the actor's height scan (``height_scan=True``).
 """
 
 from __future__ import annotations
@@ -91,6 +92,7 @@ def main() -> None:
     args_parser.add_argument("--rounds", type=int, default=5)
     args_parser.add_argument("--margin-weights", default=None, help="weights .npz (default: bundled)")
     args_parser.add_argument("--warp-cpu", action="store_true", help="add the env on MuJoCo Warp's CPU device")
+    args_parser.add_argument("--height-scan", action="store_true", help="add the env with the actor's height scan")
     args = args_parser.parse_args()
     rng = np.random.default_rng(0)
     actions = rng.uniform(-0.3, 0.3, size=(args.steps, args.num_envs, 12)).astype(np.float32)
@@ -108,6 +110,10 @@ def main() -> None:
             args.env, args.num_envs, actions, mujoco.mjtStage.mjSTAGE_ACC
         ),
     }
+    if args.height_scan:
+        runners["env, learned margin, height scan"] = env_runner(
+            args.env, args.num_envs, actions, margin="learned", height_scan=True, **extra
+        )
     if args.warp_cpu:
         runners["env, learned margin, physics='warp' on Warp's CPU device"] = env_runner(
             args.env, args.num_envs, actions, margin="learned", physics="warp", physics_device="cpu", **extra

@@ -223,6 +223,7 @@ class AnymalCore:
         self.observation_size = sum(t.size for t in self._policy_terms)
         scan = np.array(HEIGHT_SCAN_POINTS)
         self._scan_offsets = self._array(np.column_stack([scan, np.zeros(len(scan))]))  # (P, 3) in the heading frame
+        self._foot_offsets = self._array(np.array(FOOT_HEIGHT_OFFSETS))  # (9, 2): made once, not a copy per step
         self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
 
     # ------------------------------------------------------------------ arrays
@@ -675,8 +676,7 @@ class AnymalCore:
     def privileged_observation(self) -> np.ndarray:
         """Critic group: terrain heights around the feet, friction and the current margin."""
         feet = self._float(self.physics.site_xpos[:, self._feet])
-        offsets = self._array(np.array(FOOT_HEIGHT_OFFSETS))
-        points = feet[:, :, None, :2] + offsets[None, None]
+        points = feet[:, :, None, :2] + self._foot_offsets[None, None]
         heights = feet[:, :, None, 2] - self.terrain.height(points)
         values = {
             "foot_terrain_heights": self.xp.reshape(heights, (self.num_envs, -1)),

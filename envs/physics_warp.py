@@ -167,6 +167,7 @@ class WarpPhysics(ModelConstants):
             self._keyframe_of_world = wp.full(num_envs, -1, dtype=int)
             self._state_rows = wp.zeros((num_envs, mujoco.mj_stateSize(model, INTEGRATION_STATE)), dtype=float)
         self._graphs: dict[int, Any] = {}  # nstep -> the captured CUDA graph of one decimated step
+        self._no_failures = torch.zeros(0, dtype=torch.int64, device=wp.device_to_torch(self.device))
         data, view = self._data, wp.to_torch
         self.qpos, self.qvel, self.time = view(data.qpos), view(data.qvel), view(data.time)
         self.ctrl, self.xfrc_applied = view(data.ctrl), view(data.xfrc_applied)
@@ -230,7 +231,7 @@ class WarpPhysics(ModelConstants):
                     self._graphs[nstep] = capture.graph
                 wp.capture_launch(self._graphs[nstep])
         self._collect_overflow()
-        return torch.zeros(0, dtype=torch.int64, device=self.qpos.device)
+        return self._no_failures
 
     def _launch_step(self, nstep: int) -> None:
         for _ in range(nstep):

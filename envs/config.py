@@ -174,12 +174,24 @@ def check_terrain_config(config: TerrainConfig) -> None:
                 f"{where}: {name} must be a whole number >= {least} (the terrain is whole tiles of whole grid cells), "
                 f"got size={config.size}, tile={config.tile}, border={config.border}, resolution={config.resolution}"
             )
-    side = round((config.size + 2 * config.border) / config.resolution) + 1
-    if side > MAX_TERRAIN_GRID_SIDE:
+    levels = config.curriculum_levels
+    if isinstance(levels, bool) or not isinstance(levels, int) or levels == 1 or levels < 0:
         raise ValueError(
-            f"{where}: (size + 2 border) / resolution gives a {side} x {side} heightfield, more than "
-            f"{MAX_TERRAIN_GRID_SIDE} per side; use a coarser resolution, a smaller size or border (lengths are in "
-            "metres)"
+            f"{where}.curriculum_levels must be 0 (no curriculum) or a whole number >= 2 (rows of rising difficulty), "
+            f"got {levels!r}"
+        )
+    initial = config.initial_max_level
+    if isinstance(initial, bool) or not isinstance(initial, int) or initial < 0 or (levels and initial >= levels):
+        raise ValueError(
+            f"{where}.initial_max_level must be a whole level >= 0 and below curriculum_levels = {levels} "
+            f"(environments start on levels 0..initial_max_level), got {initial!r}"
+        )
+    rows, columns = config.grid_shape()
+    if max(rows, columns) > MAX_TERRAIN_GRID_SIDE:
+        raise ValueError(
+            f"{where}: the tiles and border at this resolution give a {rows} x {columns} heightfield, more than "
+            f"{MAX_TERRAIN_GRID_SIDE} per side; use a coarser resolution, a smaller size, border or fewer curriculum "
+            "levels (lengths are in metres)"
         )
 
 

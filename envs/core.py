@@ -69,7 +69,7 @@ from margin_rl.envs.stability_input import (
 )
 from margin_rl.envs.step_data import Accelerations, SimulationState, StepOutput, check_finite_outputs
 from margin_rl.envs.terminations import any_cause, info_key, termination_causes
-from margin_rl.envs.terrain import Terrain, flat_terrain, rough_terrain
+from margin_rl.envs.terrain import Terrain, flat_terrain, next_levels, rough_terrain
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
 from margin_rl.robot import mjcf_names as names
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, StabilityState
@@ -119,6 +119,7 @@ class AnymalCore:
         "max_episode_steps", "rng", "mu", "_added_mass", "command", "last_action", "episode_step", "_prev_com_vel",
         "_prev_ang_vel", "_prev_joint_vel", "_com_acc", "_ang_acc", "_air_time", "_prev_contacts",
         "_push_steps_left", "_push_force", "_push_applied", "_next_push", "_last_margin", "_last_lambda",
+        "terrain_level", "_spawn_xy",
     )  # fmt: skip
     """What a pickled core carries besides its config, terrain and physics state (everything a step changes)."""
 
@@ -171,6 +172,11 @@ class AnymalCore:
         self._next_push = xp.full(n, xp.inf, dtype=xp.float64, device=self.device)
         self._last_margin = zeros(n)
         self._last_lambda = zeros(n, LAMBDA_DIM)
+        self._spawn_xy = zeros(n, 2)  # where each episode started [m], for the curriculum's distance walked
+        self.terrain_level = zeros(n, dtype=xp.int64)  # the curriculum row each environment spawns on (0 without)
+        if self.terrain.levels:
+            first = self.rng.integers(0, config.terrain_config.initial_max_level + 1, size=n)
+            self.terrain_level = self._index(first)
 
     def _build(
         self,
@@ -258,6 +264,9 @@ class AnymalCore:
             setup = (*setup, PhysicsChoice(PHYSICS_BACKENDS[0], None, {}))
         self._build(*setup)
         self.physics.set_state(state.pop("_physics"))
+        num_envs = setup[1]  # pickled before the terrain curriculum: no levels, no spawn points kept
+        state.setdefault("terrain_level", self.xp.zeros(num_envs, dtype=self.xp.int64, device=self.device))
+        state.setdefault("_spawn_xy", self.xp.zeros((num_envs, 2), dtype=self.xp.float64, device=self.device))
         for name, value in state.items():
             setattr(self, name, value)
 
@@ -300,10 +309,17 @@ class AnymalCore:
         if n == 0:
             return
         cfg, rnd, rng, physics = self.config, self.config.randomization, self.rng, self.physics
+        if self.terrain.levels:
+            self._move_between_levels(ids)
         physics.reset(ids, self._key)
         qpos = xp.asarray(xp.broadcast_to(self._key_qpos, (n, self._key_qpos.shape[0])), copy=True)
         spawn_points = self.terrain.spawn_points_like(qpos)
-        spawn = spawn_points[rng.integers(0, spawn_points.shape[0], size=n)]
+        if self.terrain.levels:  # a tile of the environment's level, at random along its row
+            columns = spawn_points.shape[0] // self.terrain.levels
+            spawn = spawn_points[self.terrain_level[ids] * columns + self._index(rng.integers(0, columns, size=n))]
+        else:
+            spawn = spawn_points[rng.integers(0, spawn_points.shape[0], size=n)]
+        self._spawn_xy[ids] = spawn[:, :2]
         base_pos = qpos[:, names.BASE_POSITION_QPOS]  # a view: writes go to qpos
         base_pos[:, :2] = spawn[:, :2]
         base_pos[:, 2] = spawn[:, 2] + self._key_qpos[names.BASE_POSITION_QPOS][2] + 0.02  # 2 cm above the ground
@@ -342,6 +358,21 @@ class AnymalCore:
         self._push_applied[ids] = 0.0
         if rnd.push_interval_s is not None:
             self._next_push[ids] = rng.exponential(rnd.push_interval_s / self.dt, size=n)
+
+    def _move_between_levels(self, ids: Any) -> None:
+        """The terrain curriculum's step at the end of the episodes of ``ids`` (:func:`~margin_rl.envs.terrain.
+        next_levels`), before they are reset; environments that have not stepped since their last reset keep
+        their level."""
+        xp, levels = self.xp, self.terrain.levels
+        ran = self.episode_step[ids] > 0
+        where = self._float(self.physics.qpos[ids][:, names.BASE_POSITION_QPOS][:, :2])
+        walked = xp.linalg.vector_norm(where - self._spawn_xy[ids], axis=1)
+        commanded = xp.linalg.vector_norm(self.command[ids, :2], axis=1) * self.episode_step[ids] * self.dt
+        random_level = self._index(self.rng.integers(0, levels, size=int(ids.shape[0])))
+        moved = next_levels(
+            self.terrain_level[ids], walked, commanded, self.config.terrain_config.tile, levels - 1, random_level
+        )
+        self.terrain_level[ids] = xp.where(ran, moved, self.terrain_level[ids])
 
     # ------------------------------------------------------------------ state
     def _read(self, ids: Any = slice(None)) -> SimulationState:
@@ -569,6 +600,8 @@ class AnymalCore:
             "fell": flag(terminated & ~diverged),
             "diverged": flag(diverged),
             **{info_key(name): flag(flags) for name, flags in causes.items()},
+            # the curriculum row of the episode (the level it moves to is set at its reset)
+            **({"terrain_level": flag(self.terrain_level)} if self.terrain.levels else {}),
         }
 
     def push(self, ids: np.ndarray, force: np.ndarray, duration_s: float, frame: str = "world") -> None:

@@ -21,15 +21,15 @@ def build_model(robot: Robot, terrain: Terrain, terrain_config: TerrainConfig) -
     if terrain.is_flat:
         return mujoco.MjModel.from_xml_path(str(robot.scene_path))
     h = terrain.heights
-    n = h.shape[0]
-    half = (n - 1) * terrain.resolution / 2
+    rows, columns = h.shape
+    half_x, half_y = (columns - 1) * terrain.resolution / 2, (rows - 1) * terrain.resolution / 2
     z_top = terrain_config.max_height
     xml = f"""
 <mujoco model="{robot.name}_rough">
   <include file="{Path(robot.xml_path).as_posix()}"/>
   <visual><global offwidth="1280" offheight="720"/></visual>
   <asset>
-    <hfield name="terrain" nrow="{n}" ncol="{n}" size="{half} {half} {z_top} 0.1"/>
+    <hfield name="terrain" nrow="{rows}" ncol="{columns}" size="{half_x} {half_y} {z_top} 0.1"/>
     <texture type="2d" name="grid" builtin="checker" rgb1="0.35 0.4 0.45" rgb2="0.25 0.3 0.35" width="300"
              height="300"/>
     <material name="grid" texture="grid" texrepeat="24 24"/>

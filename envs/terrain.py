@@ -11,13 +11,20 @@ Every tile meets its neighbours at the base level on its border, and nowhere doe
 step (``step_height``'s upper bound): stairs and inclines are square pyramids, rising (``*_up``) or falling
 (``*_down``) from the border to the pad, so that a robot crossing tiles meets stairs, never a wall.
 
+A **terrain curriculum** (``TerrainConfig.curriculum_levels`` = L >= 2, as in legged_gym, Isaac Lab and mjlab) lays
+the tiles in L rows along y of rising difficulty instead: row l holds tiles at difficulty l / (L - 1)
+(:func:`at_difficulty`: row 0 flat, the top row ``config``'s full scale), its ``size / tile`` columns of tile types
+drawn without repetition where the row is long enough. Each environment spawns on the pad of a tile of its level
+(:attr:`Terrain.levels`, spawn points in row-major order) and moves between rows at its episode's end
+(:func:`next_levels`).
+
 Grid convention (MuJoCo's): ``heights[r, c]`` is the elevation at x = x0 + c * res, y = y0 + r * res.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -59,6 +66,25 @@ class TerrainConfig:
     pad: float = 1.0  # side of the flat spawn pad at each tile centre
     base_level: float = 0.5  # tiles start at this height so that stairs can go down
     max_height: float = 1.5  # vertical extent of the MuJoCo hfield
+    # 0: size x size of tiles of random types at the scale above; L >= 2: a curriculum of L rows of rising
+    # difficulty (the module docstring), each size long
+    curriculum_levels: int = 0
+    initial_max_level: int = 2  # curriculum: environments start on a level drawn from 0..initial_max_level
+
+    @property
+    def columns(self) -> int:
+        """Tiles along x."""
+        return round(self.size / self.tile)
+
+    @property
+    def rows(self) -> int:
+        """Tiles along y: the curriculum's levels, or as many as along x."""
+        return self.curriculum_levels or self.columns
+
+    def grid_shape(self) -> tuple[int, int]:
+        """(rows, columns) of the height grid, border included."""
+        per_tile, border = round(self.tile / self.resolution), round(self.border / self.resolution)
+        return self.rows * per_tile + 2 * border + 1, self.columns * per_tile + 2 * border + 1
 
 
 @dataclass(frozen=True)
@@ -69,10 +95,11 @@ class Terrain:
     same device: the grid and the spawn points are copied to a device once, on its first query there.
     """
 
-    heights: np.ndarray | None  # (n, n) [m], None for flat ground
+    heights: np.ndarray | None  # (rows, columns) [m], None for flat ground
     origin: tuple[float, float]  # (x0, y0) of heights[0, 0]
     resolution: float
     spawn_points: np.ndarray  # (k, 3) flat places to put a robot: x, y, ground height
+    levels: int = 0  # curriculum: the spawn points are levels rows of k / levels, row-major; 0: no curriculum
     _on_device: dict[Any, tuple[Any, Any]] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __getstate__(self) -> dict[str, Any]:
@@ -111,9 +138,9 @@ class Terrain:
         if self.heights is None:
             return xp.zeros(xy.shape[:-1], dtype=xp.float64, device=device_of(xy))
         h, _ = self._arrays_like(xy)
-        n = self.heights.shape[0]
-        u = xp.clip((xy[..., 0] - self.origin[0]) / self.resolution, 0, n - 1.000001)
-        v = xp.clip((xy[..., 1] - self.origin[1]) / self.resolution, 0, n - 1.000001)
+        rows, columns = self.heights.shape
+        u = xp.clip((xy[..., 0] - self.origin[0]) / self.resolution, 0, columns - 1.000001)
+        v = xp.clip((xy[..., 1] - self.origin[1]) / self.resolution, 0, rows - 1.000001)
         c0, r0 = xp.astype(xp.floor(u), xp.int64), xp.astype(xp.floor(v), xp.int64)
         fu, fv = u - c0, v - r0
         h00, h01, h10, h11 = h[r0, c0], h[r0, c0 + 1], h[r0 + 1, c0], h[r0 + 1, c0 + 1]
@@ -136,28 +163,50 @@ class Terrain:
         return n / xp.linalg.vector_norm(n, axis=-1, keepdims=True)
 
 
+CURRICULUM_TERRAIN = TerrainConfig(size=32.0, curriculum_levels=9)
+"""The terrain curriculum the rough recipe trains on: 9 rows of 8 tiles (each of the 8 tile types once per row),
+difficulties 0, 1/8, ..., 1 of Fig. 8's scale, environments starting on levels 0-2. Level 2k is difficulty k/4, the
+scale of the fixed-difficulty evaluation terrains (:func:`at_difficulty` of the default config)."""
+
+
+def at_difficulty(config: TerrainConfig, difficulty: float) -> TerrainConfig:
+    """``config`` with its tiles at ``difficulty`` in [0, 1] of their full scale: the step heights and the incline
+    (up to ``max_slope_deg``) scaled by it. 0 gives flat tiles, 1 ``config`` itself (by default seed 000's Fig. 8
+    scale: steps and bricks of 6-18 cm, inclines to 15 degrees). The rows of the terrain curriculum and the
+    fixed-level evaluation terrains are made with it."""
+    if not (isinstance(difficulty, (int, float)) and 0.0 <= difficulty <= 1.0):
+        raise ValueError(f"difficulty must be a number in [0, 1] (a share of the full tile scale), got {difficulty!r}")
+    low, high = config.step_height
+    return replace(
+        config, step_height=(low * difficulty, high * difficulty), max_slope_deg=config.max_slope_deg * difficulty
+    )
+
+
 def flat_terrain() -> Terrain:
     return Terrain(heights=None, origin=(0.0, 0.0), resolution=1.0, spawn_points=np.zeros((1, 3)))
 
 
 def rough_terrain(config: TerrainConfig, seed: int) -> Terrain:
-    """Generate a rough terrain; the same (config, seed) gives the same grid."""
+    """Generate a rough terrain (a curriculum where ``config.curriculum_levels`` >= 2); the same (config, seed) gives
+    the same grid."""
     rng = np.random.default_rng(seed)
     res = config.resolution
     margin = round(config.border / res)  # grid cells of flat border on each side
-    n = round(config.size / res) + 2 * margin + 1
-    heights = np.full((n, n), config.base_level)
-    tiles = round(config.size / config.tile)
-    per_tile = round(config.tile / res)
-    half_extent = config.size / 2 + margin * res
-    origin = (-half_extent, -half_extent)
-    spawns = []
-    types = rng.permutation(np.resize(np.arange(len(TILE_TYPES)), tiles * tiles))
-    centres = []
-    for ti in range(tiles):
-        for tj in range(tiles):
+    rows, columns, per_tile = config.rows, config.columns, round(config.tile / res)
+    heights = np.full(config.grid_shape(), config.base_level)
+    origin = (-(config.size / 2 + margin * res), -(rows * config.tile / 2 + margin * res))
+    levels = config.curriculum_levels
+    if levels:
+        row_configs = [at_difficulty(config, level / (levels - 1)) for level in range(levels)]
+        types = np.concatenate([rng.permutation(np.resize(np.arange(len(TILE_TYPES)), columns)) for _ in range(rows)])
+    else:
+        row_configs = [config] * rows
+        types = rng.permutation(np.resize(np.arange(len(TILE_TYPES)), rows * columns))
+    spawns, centres = [], []
+    for ti in range(rows):
+        for tj in range(columns):
             r0, c0 = margin + ti * per_tile, margin + tj * per_tile
-            block = _tile(TILE_TYPES[types[ti * tiles + tj]], per_tile + 1, res, config, rng)
+            block = _tile(TILE_TYPES[types[ti * columns + tj]], per_tile + 1, res, row_configs[ti], rng)
             heights[r0 : r0 + per_tile + 1, c0 : c0 + per_tile + 1] = config.base_level + block
             centres.append((r0 + per_tile // 2, c0 + per_tile // 2))
             spawns.append((origin[0] + (c0 + per_tile / 2) * res, origin[1] + (r0 + per_tile / 2) * res))
@@ -165,7 +214,39 @@ def rough_terrain(config: TerrainConfig, seed: int) -> Terrain:
     heights = np.clip(heights, 0.0, config.max_height)
     pad_heights = [heights[r, c] for r, c in centres]  # the pad is flat: its centre node is its height
     spawn_points = np.column_stack([np.array(spawns), pad_heights])
-    return Terrain(heights=heights, origin=origin, resolution=res, spawn_points=spawn_points)
+    return Terrain(heights=heights, origin=origin, resolution=res, spawn_points=spawn_points, levels=levels)
+
+
+PROMOTION_TILE_FRACTION = 0.5
+"""Curriculum: an episode that ends farther than this share of a tile from its spawn point moves up a level."""
+
+DEMOTION_COMMAND_FRACTION = 0.5
+"""Curriculum: an episode that ends nearer than this share of its commanded distance moves down a level."""
+
+
+def next_levels(
+    levels: Any,
+    walked: Any,
+    commanded: Any,
+    tile: float,
+    top: int,
+    random_level: Any,
+) -> Any:
+    """The curriculum's level of each environment for its next episode (legged_gym's rule).
+
+    ``walked`` [m]: horizontal distance from the episode's spawn point to where it ended; ``commanded`` [m]: the
+    commanded speed times the episode's duration. Promoted (+1) where ``walked`` > :data:`PROMOTION_TILE_FRACTION`
+    x ``tile``; otherwise demoted (-1, not below 0) where ``walked`` < :data:`DEMOTION_COMMAND_FRACTION` x
+    ``commanded``. An environment promoted beyond ``top`` (the last level) takes ``random_level`` instead (drawn by
+    the caller from 0..top), so that the top rows keep being walked without everyone piling up there. Arrays (N,)
+    of one kind (numpy or torch); levels are integers.
+    """
+    xp = namespace(levels)
+    promoted = walked > PROMOTION_TILE_FRACTION * tile
+    demoted = ~promoted & (walked < DEMOTION_COMMAND_FRACTION * commanded)
+    moved = levels + xp.astype(promoted, levels.dtype) - xp.astype(demoted, levels.dtype)
+    moved = xp.where(moved > top, random_level, moved)
+    return xp.clip(moved, min=0)
 
 
 def _tile(kind: str, m: int, res: float, config: TerrainConfig, rng: np.random.Generator) -> np.ndarray:

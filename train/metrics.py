@@ -253,8 +253,12 @@ def step_tags(info: Mapping[str, Any]) -> dict[str, float]:
     margin = xp.astype(xp.asarray(info["margin"]), xp.float64, copy=False)
     lin = xp.linalg.vector_norm(xp.asarray(info["base_lin_acc"]), axis=1)
     velocity_error = xp.mean(xp.asarray(info["velocity_error"]))
-    values = to_numpy(xp.stack([xp.mean(margin), xp.min(margin), xp.mean(lin), velocity_error]))
-    names = ("Step/margin_mean", "Step/margin_min", "Step/lin_acc_norm_mean", "Step/velocity_error_mean")
+    statistics = [xp.mean(margin), xp.min(margin), xp.mean(lin), velocity_error]
+    names = ["Step/margin_mean", "Step/margin_min", "Step/lin_acc_norm_mean", "Step/velocity_error_mean"]
+    if "terrain_level" in info:  # the terrain curriculum's mean level
+        statistics.append(xp.mean(xp.astype(xp.asarray(info["terrain_level"]), xp.float64)))
+        names.append("Curriculum/terrain_level_mean")
+    values = to_numpy(xp.stack(statistics))
     return {name: float(value) for name, value in zip(names, values, strict=True)}
 
 

@@ -6,21 +6,26 @@ them. This rolls the shipped flat bundles of a robot (both variants, every seed;
 actions, 0.75 m/s) over rough terrains of rising difficulty and compares the default learned margin with the
 extended analytic margin m_x (the target the network was trained on) on the visited states.
 
-Levels: the environments' rough terrain (``TerrainConfig``) with its step heights and incline scaled by the level,
-1.0 being seed 000's Fig. 8 scale (steps and bricks 6–18 cm, inclines to 15°); a provisional scale until the
-curriculum defines its rows. Evaluation seed 5000 (the terrain and the initial states), held out of every
-labelling. States: every ``--every``-th policy step after the first second, diverged ones left out.
+Levels: the environments' rough terrain at a difficulty (:func:`margin_rl.envs.terrain.at_difficulty`: step heights
+and incline scaled by it), 1.0 being seed 000's Fig. 8 scale (steps and bricks 6–18 cm, inclines to 15°); the
+terrain curriculum's rows are the same difficulties. Evaluation seed 5000 (the terrain and the initial states), held
+out of every labelling. States: every ``--every``-th policy step after the first second, diverged ones left out.
+
+``--record FILE`` instead writes the visited states (npz, key ``lam``), the input of ``dataset generate
+--distribution rollouts``; record training states with another ``--seed`` than the evaluation's.
 
 Usage::
 
     python benchmarks/studies/bench_margin_rough_levels.py --robot anymal_c [--levels 0.25 0.5 0.75 1.0]
+        [--bundle-seeds 3 4] [--weights anymal_c --weights data/candidate.npz]
         [--envs 8] [--steps 250] [--every 5] [--json docs/learned_margin/rough_levels_anymal_c.json]
+    python benchmarks/studies/bench_margin_rough_levels.py --robot anymal_c --bundle-seeds 0 1 2 --seed 4000 \
+        --levels 0.125 0.25 0.375 0.5 0.625 0.75 0.875 1 --envs 16 --every 1 --record data/rough_anymal_c_train.npz
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 import time
@@ -32,7 +37,7 @@ import numpy as np
 
 from margin_rl import load_robot
 from margin_rl.envs.core import AnymalCore
-from margin_rl.envs.terrain import MIN_SLOPE_DEG, TerrainConfig
+from margin_rl.envs.terrain import MIN_SLOPE_DEG, TerrainConfig, at_difficulty
 from margin_rl.stability import LearnedMargin
 from margin_rl.stability.analytic.extended import extended_margin_batch
 from margin_rl.train.artifacts.bundle import load_bundle
@@ -45,21 +50,16 @@ RMSE_TARGET_M = 0.03
 SIGN_TARGET = 0.95
 
 
-def level_terrain(level: float, base: TerrainConfig = TerrainConfig()) -> TerrainConfig:  # noqa: B008
-    """The rough terrain with step heights and incline scaled by ``level`` (1: Fig. 8's 6-18 cm, 15 degrees)."""
-    low, high = base.step_height
-    return dataclasses.replace(
-        base, step_height=(low * level, high * level), max_slope_deg=max(base.max_slope_deg * level, 0.1)
-    )
-
-
-def visited_states(policy_path: Path, level: float, envs: int, steps: int, every: int) -> tuple[np.ndarray, float]:
-    """(lambda (M, 47), share of episodes that fell) of one policy on the level's terrain."""
+def visited_states(
+    policy_path: Path, level: float, envs: int, steps: int, every: int, seed: int = EVALUATION_SEED
+) -> tuple[np.ndarray, float]:
+    """(lambda (M, 47), share of episodes that fell) of one policy on the level's terrain (terrain and initial
+    states of ``seed``)."""
     policy = load_policy(policy_path)
-    overrides = {"margin": "none", "terrain": "rough", "terrain_config": level_terrain(level)}
+    overrides = {"margin": "none", "terrain": "rough", "terrain_config": at_difficulty(TerrainConfig(), level)}
     _, base = resolve_env(policy, None, overrides)
-    core = AnymalCore(evaluation_config(base, 0.75), num_envs=envs, seed=EVALUATION_SEED)
-    core.reset(seed=EVALUATION_SEED)
+    core = AnymalCore(evaluation_config(base, 0.75), num_envs=envs, seed=seed)
+    core.reset(seed=seed)
     obs = core.observe_all()
     kept, falls = [], 0
     warmup = round(1.0 / core.dt)
@@ -73,20 +73,25 @@ def visited_states(policy_path: Path, level: float, envs: int, steps: int, every
     return np.concatenate(kept), falls / envs
 
 
-def compare(robot: str, lam: np.ndarray, weights: LearnedMargin) -> dict[str, float]:
-    """The learned margin against m_x on ``lam``: RMSE, bias, sign agreement, the share outside the training
-    ranges."""
+def analytic_targets(robot: str, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the states with an extended analytic margin, m_x on them [m])."""
     target = extended_margin_batch(load_robot(robot), lam, workers=2).margin
     ok = np.isfinite(target)
-    learned = np.asarray(weights(lam[ok]))
-    error = learned - target[ok]
+    return lam[ok], target[ok]
+
+
+def compare(lam: np.ndarray, target: np.ndarray, weights: LearnedMargin) -> dict[str, float]:
+    """The learned margin against m_x on ``lam``: RMSE, bias, sign agreement, the share outside the training
+    ranges."""
+    learned = np.asarray(weights(lam))
+    error = learned - target
     return {
-        "states": int(ok.sum()),
+        "states": len(lam),
         "rmse_m": float(np.sqrt(np.mean(error**2))),
         "bias_m": float(np.mean(error)),
-        "sign_agreement": float(np.mean(np.sign(learned) == np.sign(target[ok]))),
-        "out_of_distribution": float(np.mean(weights.out_of_distribution(lam[ok]))),
-        "analytic_mean_m": float(np.mean(target[ok])),
+        "sign_agreement": float(np.mean(np.sign(learned) == np.sign(target))),
+        "out_of_distribution": float(np.mean(weights.out_of_distribution(lam))),
+        "analytic_mean_m": float(np.mean(target)),
     }
 
 
@@ -94,43 +99,73 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="anymal_c", choices=("anymal_b", "anymal_c"))
     parser.add_argument("--levels", type=float, nargs="+", default=[0.25, 0.5, 0.75, 1.0])
+    parser.add_argument("--bundle-seeds", type=int, nargs="+", default=None, help="only these training seeds' policies")
+    parser.add_argument("--seed", type=int, default=EVALUATION_SEED, help="terrain and initial states")
+    parser.add_argument(
+        "--weights", action="append", default=None, help="learned margins to compare (default: the robot's default)"
+    )
     parser.add_argument("--envs", type=int, default=8)
     parser.add_argument("--steps", type=int, default=250)
     parser.add_argument("--every", type=int, default=5)
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--record", type=Path, default=None, help="write the visited states (npz, key lam); no labels")
     args = parser.parse_args()
     bundle = load_bundle(args.robot)
-    weights = LearnedMargin.load(args.robot)  # the default network, what the environments use
-    rows = []
+    runs = [r for r in bundle.runs if args.bundle_seeds is None or r.seed in args.bundle_seeds]
+    if not runs:
+        parser.error(f"no policy of bundle {bundle.name} has a training seed in {args.bundle_seeds}")
+    names = args.weights or [args.robot]  # the robot's name: the default network, what the environments use
+    networks = {name: LearnedMargin.load(name) for name in names}
+    rows, recorded = [], []
     with torch_threads(1):
         for level in args.levels:
             t0 = time.perf_counter()
             states, falls = [], []
-            for run in bundle.runs:
-                lam, fell = visited_states(run.policy, level, args.envs, args.steps, args.every)
+            for run in runs:
+                lam, fell = visited_states(run.policy, level, args.envs, args.steps, args.every, args.seed)
                 states.append(lam)
                 falls.append(fell)
-            result = compare(args.robot, np.concatenate(states), weights)
-            row = {"level": level, "falls_per_env": float(np.mean(falls)), **result}
-            row["meets_target"] = row["rmse_m"] <= RMSE_TARGET_M and row["sign_agreement"] >= SIGN_TARGET
+            lam = np.concatenate(states)
+            row: dict = {"level": level, "falls_per_env": float(np.mean(falls)), "visited": len(lam)}
+            if args.record is not None:
+                recorded.append(lam)
+            else:
+                lam, target = analytic_targets(args.robot, lam)
+                row["networks"] = {}
+                for name, network in networks.items():
+                    result = compare(lam, target, network)
+                    met = result["rmse_m"] <= RMSE_TARGET_M and result["sign_agreement"] >= SIGN_TARGET
+                    result["meets_target"] = met
+                    row["networks"][name] = result
             row["seconds"] = time.perf_counter() - t0
             rows.append(row)
             print(json.dumps(row), flush=True)
-    print(f"\n{args.robot}, default learned margin (sha256 {str(weights.card.get('sha256'))[:12]}) against m_x\n")
-    print("| level (Fig. 8 = 1) | states | RMSE [cm] | bias [cm] | sign agreement | outside training ranges |")
-    print("|---|---|---|---|---|---|")
-    for r in rows:
-        print(
-            f"| {r['level']:g} | {r['states']:,} | {100 * r['rmse_m']:.1f} | {100 * r['bias_m']:+.1f} "
-            f"| {r['sign_agreement']:.1%} | {r['out_of_distribution']:.1%} |"
-        )
+    if args.record is not None:
+        lam = np.concatenate(recorded)
+        args.record.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(args.record, lam=lam.astype(np.float32))
+        print(f"{len(lam):,} states: {args.record}")
+        return 0
+    policies = ", ".join(f"{r.variant} s{r.seed}" for r in runs)
+    print(f"\n{args.robot}, learned margins against m_x (seed {args.seed}; policies {policies})\n")
+    print("| network | level (Fig. 8 = 1) | states | RMSE [cm] | bias [cm] | sign | outside training ranges |")
+    print("|---|---|---|---|---|---|---|")
+    for name, network in networks.items():
+        for r in rows:
+            n = r["networks"][name]
+            print(
+                f"| {name} ({str(network.card.get('sha256'))[:8]}) | {r['level']:g} | {n['states']:,} "
+                f"| {100 * n['rmse_m']:.1f} | {100 * n['bias_m']:+.1f} | {n['sign_agreement']:.1%} "
+                f"| {n['out_of_distribution']:.1%} |"
+            )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         record = {
             "command": " ".join([Path(sys.executable).name, *sys.argv]),
             "robot": args.robot,
-            "weights_sha256": weights.card.get("sha256"),
-            "evaluation_seed": EVALUATION_SEED,
+            "weights_sha256": {name: network.card.get("sha256") for name, network in networks.items()},
+            "seed": args.seed,
+            "policies": [{"variant": r.variant, "seed": r.seed} for r in runs],
             "min_slope_deg": MIN_SLOPE_DEG,
             "targets": {"rmse_m": RMSE_TARGET_M, "sign_agreement": SIGN_TARGET},
             "levels": rows,

@@ -350,3 +350,24 @@ def test_the_height_scan_is_the_same_on_the_device() -> None:
     assert got.shape == expected.shape and got.shape[1] > 48
     np.testing.assert_allclose(got[:, 48:], expected[:, 48:], atol=FLAT["observation"])
     assert np.ptp(expected[:, 48:]) > 0.1  # the scan saw the tiles' relief
+
+
+def test_the_terrain_curriculum_runs_on_the_device() -> None:
+    """Levels, the level rule and spawning by level on the Warp core's tensors equal the mujoco.batch core's, from
+    the same state and the same draws: half the worlds carried 3 m (promoted), the others left standing (demoted)."""
+    from margin_rl.envs.terrain import TerrainConfig
+
+    curriculum = TerrainConfig(size=8.0, tile=4.0, border=0.0, curriculum_levels=4, initial_max_level=3)
+    reference, warp = _pair("rough", terrain_config=curriculum)
+    for _ in range(5):
+        reference.step(np.zeros((N, 12)))
+    reference.physics.qpos[::2, 0] += 3.0
+    before = reference.terrain_level.copy()
+    _mirror(reference, warp)
+    reference.reset()
+    warp.reset()
+    assert isinstance(warp.terrain_level, torch.Tensor)
+    np.testing.assert_array_equal(to_numpy(warp.terrain_level), reference.terrain_level)
+    assert np.all(reference.terrain_level[1::2] == np.maximum(before[1::2] - 1, 0))  # demoted
+    np.testing.assert_allclose(to_numpy(warp._spawn_xy), reference._spawn_xy)
+    np.testing.assert_allclose(to_numpy(warp.physics.qpos)[:, :2], reference.physics.qpos[:, :2], atol=1e-6)

@@ -31,6 +31,12 @@ The recipe's name is written into the run's ``config.json``.
   pushes from 45 N s less often than the baselines (same section); weight 0.5 on C (three seeds) keeps lateral
   survival at 45 N s but misses the acceleration significance and the falls tolerance, so 0.1 stays. The shipped
   robust bundles were trained at 0.2 before and keep it (their ``config.json``).
+* ``rough`` — the robust recipe on the paper's setting, rough ground, with what the field's rough-terrain ANYmal tasks
+  (legged_gym, Isaac Lab) add to their flat ones: the terrain curriculum (``CURRICULUM_TERRAIN``: 9 rows of the 8
+  tile types up to Fig. 8's 6-18 cm steps and 15 degree inclines), the actor's height scan (a perceptive policy)
+  and the privileged critic group (heights around the feet, friction, the margin), 25M steps (of the order the
+  rough-terrain issue budgets on this CPU). The starting point of the rough pilots: terms the pilots show to be
+  needed (a termination penalty, foot-edge or thigh-contact terms) join it for both variants.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from margin_rl.envs.config import CommandConfig, RandomizationConfig
+from margin_rl.envs.terrain import CURRICULUM_TERRAIN
 from margin_rl.train.config import BACKENDS
 
 
@@ -87,6 +94,14 @@ class TrainingRecipe:
 
 
 _KNEE_TERM = {"alive_bonus": 0.1, "knee_clearance": 5.0}
+_ROBUST_ENV = {
+    "reward_params": dict(_KNEE_TERM),
+    "command": CommandConfig(forward_velocity=(0.2, 1.1)),
+    "randomization": RandomizationConfig(
+        friction=(0.3, 1.25), added_base_mass=(-5.0, 5.0), push_interval_s=8.0, push_force=150.0, push_duration_s=0.2
+    ),
+}
+_NO_ENTROPY_BONUS = {"rsl": {"entropy_coef": 0.0}, "sb3": {"ent_coef": 0.0}}
 
 RECIPES: dict[str, TrainingRecipe] = {
     recipe.name: recipe
@@ -103,21 +118,27 @@ RECIPES: dict[str, TrainingRecipe] = {
             name="robust",
             summary="commands 0.2-1.1 m/s, friction 0.3-1.25, base mass +-5 kg, pushes 30 N s every 8 s, 512 envs, "
             "no entropy bonus",
-            env_options={
-                "reward_params": dict(_KNEE_TERM),
-                "command": CommandConfig(forward_velocity=(0.2, 1.1)),
-                "randomization": RandomizationConfig(
-                    friction=(0.3, 1.25),
-                    added_base_mass=(-5.0, 5.0),
-                    push_interval_s=8.0,
-                    push_force=150.0,
-                    push_duration_s=0.2,
-                ),
-            },
+            env_options=_ROBUST_ENV,
             num_envs=512,
             total_steps=10_000_000,
             margin_weight=0.1,
-            ppo_options={"rsl": {"entropy_coef": 0.0}, "sb3": {"ent_coef": 0.0}},
+            ppo_options=_NO_ENTROPY_BONUS,
+        ),
+        TrainingRecipe(
+            name="rough",
+            summary="the robust recipe on the terrain curriculum (9 rows up to Fig. 8's scale) with the actor's height "
+            "scan and the privileged critic, 512 envs, 25M steps",
+            env_options={
+                **_ROBUST_ENV,
+                "terrain": "rough",
+                "terrain_config": CURRICULUM_TERRAIN,
+                "height_scan": True,
+                "privileged_observations": True,
+            },
+            num_envs=512,
+            total_steps=25_000_000,
+            margin_weight=0.1,
+            ppo_options=_NO_ENTROPY_BONUS,
         ),
     )
 }

@@ -40,10 +40,10 @@ from margin_rl.stability import LAMBDA_DIM, LearnedMargin
 def planning_weights(robot_name: str) -> str:
     """The bundled learned-margin weights the planner uses for ``robot_name``: the robot's default network.
 
-    One network per robot serves the environments, the planner and users. The default (learned margin v5) is
-    trained on Table I and on the neighbourhoods of walking policies' states. Along the planner's courses the
-    analytic margin stays above the bound at every sampled instant and every course reaches its goal (BENCHMARKS.md,
-    "Trajectory optimisation plans"); the Table I network the planner used before stays loadable as
+    One network per robot serves the environments, the planner and users. The default (learned margin v6) is
+    trained on Table I and on the neighbourhoods of walking policies' states, flat and rough. Along the planner's
+    courses the analytic margin stays above the bound at every sampled instant and every course reaches its goal
+    (docs/planning.md, "Results"); the Table I network the planner used before stays loadable as
     ``<robot>_table_i`` (``--weights``).
     """
     return robot_name

@@ -97,3 +97,28 @@ def test_recipe_ppo_options_are_keyed_by_backend() -> None:
     with pytest.raises(ValueError, match="unknown backend 'jax'"):
         get_recipe("robust").ppo_overrides("jax")
     assert get_recipe("fixed_command").ppo_overrides("rsl") == {}
+
+
+def test_rough_recipe_is_the_robust_one_on_the_curriculum_with_perception() -> None:
+    from margin_rl.envs.terrain import CURRICULUM_TERRAIN
+
+    rough, robust = _spec("--recipe", "rough"), _spec("--recipe", "robust")
+    config = rough.env_config
+    assert config.terrain == "rough" and config.terrain_config == CURRICULUM_TERRAIN
+    assert config.terrain_config.curriculum_levels == 9
+    assert config.height_scan and config.privileged_observations and rough.total_steps == 25_000_000
+    flat = {"terrain": "flat", "terrain_config": robust.env_config.terrain_config}
+    flat_fields = config.replace(**flat, height_scan=False, privileged_observations=False)
+    assert flat_fields == robust.env_config  # everything else as the robust recipe, the margin weight included
+    assert rough.ppo == robust.ppo
+    assert train_module.TrainSpec.from_json(rough.to_json()) == rough  # the curriculum survives config.json
+
+
+def test_a_fixed_terrain_difficulty_sets_the_rough_tiles_at_that_scale() -> None:
+    config = _spec("--terrain-difficulty", "0.5").env_config
+    assert config.terrain == "rough" and config.terrain_config.curriculum_levels == 0
+    assert config.terrain_config.step_height == (0.03, 0.09) and config.terrain_config.max_slope_deg == 7.5
+    with pytest.raises(ValueError, match="difficulty must be a number in"):
+        _spec("--terrain-difficulty", "1.5")
+    with pytest.raises(ValueError, match="--terrain-difficulty sets terrain_config"):
+        _spec("--terrain-difficulty", "0.5", "--env-option", 'terrain_config={"step_height": [0.0, 0.1]}')

@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from margin_rl.envs.margin_kinds import MARGIN_KINDS
+from margin_rl.envs.terrain import TerrainConfig, at_difficulty
 from margin_rl.train.config import parse_assignments
 from margin_rl.train.environments import DEFAULT_ENV, anymal_id
 
@@ -39,6 +40,14 @@ def add_env_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (default: bundled)")
     parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (default paper)")
     parser.add_argument(
+        "--terrain-difficulty",
+        type=float,
+        metavar="D",
+        help="rough ground at D in [0, 1] of seed 000's Fig. 8 scale (steps 6-18 cm and inclines to 15 degrees times "
+        "D): the default 24 m square of tiles of every type, seeded by the environment's seed; the fixed-difficulty "
+        "terrains of rough-ground comparisons (sets terrain and terrain_config)",
+    )
+    parser.add_argument(
         "--env-option",
         action="append",
         metavar="KEY=VALUE",
@@ -55,6 +64,11 @@ def env_overrides(args: argparse.Namespace) -> dict[str, Any]:
             overrides[key] = getattr(args, key)
     if getattr(args, "margin_weight", None) is not None:
         overrides["margin_weight"] = args.margin_weight
+    if getattr(args, "terrain_difficulty", None) is not None:
+        if "terrain_config" in overrides:
+            raise ValueError("--terrain-difficulty sets terrain_config: give one of it and --env-option terrain_config")
+        overrides["terrain"] = "rough"
+        overrides["terrain_config"] = at_difficulty(TerrainConfig(), args.terrain_difficulty)
     return overrides
 
 

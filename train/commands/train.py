@@ -550,6 +550,7 @@ RUN_DEFINING_OPTIONS = (
     "--margin",
     "--margin-weight",
     "--reward-preset",
+    "--terrain-difficulty",
     "--env-option",
     "--seed",
     "--num-envs",

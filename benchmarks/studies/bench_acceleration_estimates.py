@@ -1,7 +1,7 @@
 """Which accelerations should enter lambda? Three estimators along walking episodes, and the margin each gives.
 
 Usage:
-    python benchmarks/studies/bench_acceleration_estimates.py [--bundle anymal_b_v1] [--episodes 4] [--steps 250] \
+    python benchmarks/studies/bench_acceleration_estimates.py [--bundle anymal_b] [--episodes 4] [--steps 250] \
         [--figure docs/learned_margin/acceleration_estimates_anymal_b.png]
 
 The bundled policies (both variants, ``--episodes`` seeds each) walk at 0.75 m/s; after every 20 ms policy
@@ -178,13 +178,13 @@ def plot(episode: dict[str, dict[str, np.ndarray]], path: Path, title: str) -> N
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--bundle", default="anymal_b_v1")
+    parser.add_argument("--bundle", default="anymal_b")
     parser.add_argument("--episodes", type=int, default=4, help="evaluation seeds per variant")
     parser.add_argument("--steps", type=int, default=250, help="policy steps per episode (20 ms each)")
     parser.add_argument("--figure", type=Path, default=None)
     args = parser.parse_args()
     bundle = load_bundle(args.bundle)
-    # The robot of the policies' training environment (a bundle's name need not be a robot's: anymal_b_v1).
+    # The robot of the policies' training environment (a bundle's name need not be a robot's).
     robot = resolve_env(load_policy(bundle.runs[0].policy), None, {})[1].robot
     learned = LearnedMargin.load(str(bundle.margin_weights)) if bundle.margin_weights else LearnedMargin.load(robot)
     episodes, first = [], None

@@ -1,7 +1,7 @@
 """Why do the margin policies fall? Falls, gait, reward terms and margins along a bundle's episodes.
 
 Usage:
-    MUJOCO_GL=egl python benchmarks/studies/bench_fall_analysis.py --bundle anymal_b_v1 --envs 64 \
+    MUJOCO_GL=egl python benchmarks/studies/bench_fall_analysis.py --bundle anymal_b --envs 64 \
         --seed 1000 5000 --workers 2 --json docs/comparison/fall_analysis_anymal_b.json \
         --figure docs/comparison/fall_analysis_anymal_b.png
 
@@ -69,7 +69,7 @@ from margin_rl.train.commands.evaluate import DEFAULT_FORWARD_VELOCITY
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
-    parser.add_argument("--bundle", default="anymal_b_v1", help="shipped bundle name or folder")
+    parser.add_argument("--bundle", default="anymal_b", help="shipped bundle name or folder")
     parser.add_argument("--envs", type=int, default=32, help="episodes (parallel environments) per policy and seed")
     parser.add_argument("--seed", type=int, nargs="+", default=[1000, 5000], help="evaluation seeds")
     parser.add_argument("--forward-velocity", type=float, default=DEFAULT_FORWARD_VELOCITY, help="command [m/s]")

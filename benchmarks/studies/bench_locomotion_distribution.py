@@ -1,7 +1,7 @@
 """The distribution of lambda over walking-policy rollouts, against seed 000's Table I sampler.
 
 Usage:
-    python benchmarks/studies/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b_v1 \
+    python benchmarks/studies/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b \
         [--bundle-seeds 0 1 2] [--policy runs/<run>/policy_torchscript.pt ...] [--num-envs 16] [--steps 250] \
         [--json docs/learned_margin/locomotion_distribution_anymal_b.json] [--figure ...png]
 

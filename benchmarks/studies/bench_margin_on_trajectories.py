@@ -1,7 +1,7 @@
 """Experiment: learned vs analytic margin on the states that trained policies actually visit.
 
 Usage:
-    python benchmarks/studies/bench_margin_on_trajectories.py [--bundle anymal_b_v1] [--envs 8] [--steps 500]
+    python benchmarks/studies/bench_margin_on_trajectories.py [--bundle anymal_b] [--envs 8] [--steps 500]
         [--every 5] [--forward-velocity 0.75] [--seed 2000] [--weights PATH_OR_ROBOT ...] [--workers 2]
 
 The held-out test split of a model card measures the learned margin on Table I samples; a policy walks in
@@ -62,7 +62,7 @@ def compare(model: LearnedMargin, lam: np.ndarray, analytic: np.ndarray) -> dict
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--bundle", default="anymal_b_v1")
+    parser.add_argument("--bundle", default="anymal_b")
     parser.add_argument("--envs", type=int, default=8)
     parser.add_argument("--steps", type=int, default=500, help="policy steps per rollout (50 Hz)")
     parser.add_argument("--every", type=int, default=5)

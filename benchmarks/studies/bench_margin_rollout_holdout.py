@@ -2,7 +2,7 @@
 
 Usage:
     # 1. record the visited lambdas of the bundled ANYmal B policies (6 policies x 5 conditions x 8 envs x 250 steps)
-    python benchmarks/studies/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b_v1 --num-envs 8 \
+    python benchmarks/studies/bench_locomotion_distribution.py --robot anymal_b --bundle anymal_b --num-envs 8 \
         --steps 250 --states data/rollouts_anymal_b.npz
     # 2. split them by policy: the last policy's states are held out
     python benchmarks/studies/bench_margin_rollout_holdout.py split --states data/rollouts_anymal_b.npz --policies 6 \

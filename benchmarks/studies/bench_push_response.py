@@ -16,6 +16,10 @@ Usage::
 
     python benchmarks/studies/bench_push_response.py --bundled anymal_c [--impulse 45] [--forward-velocity 0.75]
         [--episodes 32] [--out docs/comparison/push_response]
+    # the bundle's baselines against margin policies trained since (finished runs), both measured with the
+    # package's default learned margin (or --margin-weights):
+    python benchmarks/studies/bench_push_response.py --bundled anymal_c \
+        --margin-runs runs/release/anymal_c/with_margin_s*
 
 Protocol: the push-recovery protocol (``margin_rl.train.commands.push_recovery``): the same seed, push times in
 2-4 s after the reset and signs for every policy, a constant force ``impulse / 0.1 s`` across the heading, the
@@ -52,7 +56,7 @@ from margin_rl.train.artifacts.policies import load_policy
 from margin_rl.train.commands.evaluate import evaluation_target
 from margin_rl.train.commands.push_recovery import PushProtocol, push_forces, push_schedule
 from margin_rl.train.environments import ACTION_SIZE
-from margin_rl.train.runs import torch_threads, write_json
+from margin_rl.train.runs import CONFIG_FILE, TORCHSCRIPT_FILE, read_json, torch_threads, write_json
 
 GRAVITY = 9.81  # [m/s^2]
 BEFORE_S = 0.5  # trace window before the push [s]
@@ -189,6 +193,21 @@ def survival_correlations(report: dict[str, Any]) -> dict[str, dict[str, float]]
     return result
 
 
+def margin_runs(run_dirs: list[Path]) -> tuple[float, list[tuple[int, Path]]]:
+    """(margin weight, [(seed, TorchScript actor)]) of finished training runs of one margin weight."""
+    weights, runs = set(), []
+    for run in run_dirs:
+        config, actor = run / CONFIG_FILE, run / TORCHSCRIPT_FILE
+        if not (config.is_file() and actor.is_file()):
+            raise SystemExit(f"--margin-runs {run}: not a finished run (no {CONFIG_FILE} or {TORCHSCRIPT_FILE})")
+        recorded = read_json(config)
+        weights.add(float(recorded["env_config"]["margin_weight"]))
+        runs.append((int(recorded["seed"]), actor))
+    if len(weights) != 1 or 0.0 in weights:
+        raise SystemExit(f"--margin-runs: the runs must share one margin weight > 0, got {sorted(weights)}")
+    return weights.pop(), sorted(runs)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--bundled", default="anymal_c", help="a policy bundle (shipped name or folder)")
@@ -198,14 +217,32 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--window-s", type=float, default=1.0, help="the recovery window after the push [s]")
     parser.add_argument("--step-threshold", type=float, default=0.05, help="a recovery step's lateral length [m]")
     parser.add_argument("--out", type=Path, default=Path("push_response"))
+    parser.add_argument(
+        "--margin-runs",
+        type=Path,
+        nargs="+",
+        default=None,
+        help="finished training runs that replace the bundle's margin variant (their TorchScript actors)",
+    )
+    parser.add_argument(
+        "--margin-weights", default=None, help="with --margin-runs: the learned margin both variants are measured with"
+    )
     args = parser.parse_args(argv)
     bundle = load_bundle(args.bundled)
+    variants = bundle.variants()
+    env_overrides = bundle.env_overrides()
+    if args.margin_runs:
+        variants = {**variants, "with margin": margin_runs(args.margin_runs)}
+        # One network measures both variants: the baselines' reward never used theirs (weight 0).
+        env_overrides = {} if args.margin_weights is None else {"margin_weights": args.margin_weights}
     protocol = replace(
         PushProtocol(), impulses=(args.impulse,), directions=("lateral",),
         forward_velocities=(args.forward_velocity,), episodes=args.episodes,
     )  # fmt: skip
     report: dict[str, Any] = {
         "bundle": bundle.name,
+        "margin_runs": [str(run) for run in args.margin_runs or []],
+        "env_overrides": env_overrides,
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
         "protocol": {**vars(args), "out": str(args.out), "push_seed": protocol.seed},
         "metrics": METRICS,
@@ -213,10 +250,10 @@ def main(argv: list[str] | None = None) -> int:
     }
     traces: dict[str, dict[str, list[float]]] = {}
     with torch_threads(1):
-        for variant, (weight, runs) in bundle.variants().items():
+        for variant, (weight, runs) in variants.items():
             policies, curves = [], {key: [] for key in ("margin", "stance", "height")}
             for seed, path in runs:
-                rec = record(path, bundle.env_overrides(), protocol, args.impulse)
+                rec = record(path, env_overrides, protocol, args.impulse)
                 episodes = [
                     episode_metrics(rec, env, args.window_s, args.step_threshold)
                     for env in range(len(rec["start"]))

@@ -27,7 +27,7 @@ from margin_rl.train.environments import anymal_id
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "train_slip_hopper.py"
 SLIP = "margin_rl/SLIPHopper-v0"
-BUNDLED_POLICY = ROOT / "train" / "bundled" / "anymal_b_v1" / "with_margin__s0" / "policy.pt"
+BUNDLED_POLICY = ROOT / "train" / "bundled" / "anymal_b" / "with_margin__s0" / "policy.pt"
 
 
 def assert_refused(message: str) -> None:

@@ -45,7 +45,7 @@ the learned-margin weights they were trained with, into a policy bundle with a c
 (:mod:`margin_rl.train.artifacts.bundle`); ``--bundled NAME`` trains nothing and evaluates a bundle the same way,
 with the bundle's margin weights, e.g. the shipped ANYmal B policies (the README's main job)::
 
-    python -m margin_rl.train compare --bundled anymal_b_v1 --out results/anymal_b_v1
+    python -m margin_rl.train compare --bundled anymal_b --out results/anymal_b
 
 With ``--bundled``, ``--env-option``/``--margin-weights`` change the evaluation environment (other terrain, the
 package's current margin weights, ...); the card's table then need not be reproduced.

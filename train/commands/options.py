@@ -3,8 +3,8 @@
 :func:`add_env_arguments` adds the options that shape the environment, :func:`env_overrides` turns them into
 EnvConfig field overrides.
 
-Training defaults of the command line (``train`` and ``compare``): the shipped, working
-experiment of the README and ``bundled/anymal_b_v1/CARD.md``, margin weight :data:`CLI_MARGIN_WEIGHT` and
+Training defaults of the command line (``train`` and ``compare``): the experiment of the first comparison (its
+numbers are in the bundles' card history), margin weight :data:`CLI_MARGIN_WEIGHT` and
 ``reward_params.alive_bonus`` :data:`CLI_ALIVE_BONUS` (:func:`with_training_defaults`). ``EnvConfig``'s own
 defaults (the paper's reward: weight 1, no bonus) stay what the Python API and the environments use: with them, a
 trot's negative learned margin makes every step's reward negative and PPO learns to fall.

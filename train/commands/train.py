@@ -15,7 +15,7 @@ Environments: the batched ANYmal ids (``vector_entry_point`` of the batched core
 too. Any other id is an error naming the ANYmal ids: other Gymnasium environments, e.g. the SLIP hopper, are
 trained with plain Stable-Baselines3 (``examples/train_slip_hopper.py``). See :mod:`margin_rl.train.environments`.
 
-Defaults: the shipped, working experiment of the README and ``bundled/anymal_b_v1/CARD.md``,
+Defaults: the command line's long-standing experiment (the first comparison's, now in the bundles' card history),
 ``--margin-weight 0.2`` and ``--env-option reward_params.alive_bonus=0.1`` unless given
 (:mod:`margin_rl.train.commands.options`; ``make_spec`` and ``EnvConfig`` keep the paper's reward: weight 1, no
 bonus).

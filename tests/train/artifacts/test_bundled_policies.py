@@ -3,17 +3,33 @@ still walking in the current environment (a change of the observation layout or 
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 
 from margin_rl.train.artifacts.bundle import bundled_names, load_bundle
 from margin_rl.train.artifacts.policies import load_policy
 from margin_rl.train.commands.evaluate import evaluate
 
-SHIPPED = {  # the ids the bundles stored (-v0 is read as -v1: margin_rl.registration.current_env_id)
-    "anymal_b_v1": "margin_rl/AnymalB-v0",  # the first comparison (v1 learned margin, one command)
+SHIPPED = {  # the ids the bundles stored
     "anymal_b": "margin_rl/AnymalB-v1",  # the robust recipe, v2 learned margin
     "anymal_c": "margin_rl/AnymalC-v1",
 }
+V0_RUN = Path(__file__).resolve().parents[2] / "fixtures" / "v0_run" / "config.json"
+"""The config.json of a run stored under a retired -v0 id (the first comparison's, margin seed 0): runs and bundles
+of that time must still resume and evaluate."""
+
+
+def test_a_run_stored_under_a_retired_id_is_read_as_the_current_one() -> None:
+    from margin_rl.train.commands.train import TrainSpec
+    from margin_rl.train.environments import anymal_id
+
+    stored = json.loads(V0_RUN.read_text())
+    assert stored["env_id"] == "margin_rl/AnymalB-v0" and "recipe" not in stored
+    spec = TrainSpec.from_json(stored)  # what --resume and compare --runs read
+    assert anymal_id(spec.env_id) == "margin_rl/AnymalB-v1"
+    assert spec.env_config.margin_weight == 0.2 and spec.num_envs == 128 and spec.total_steps == 5_000_000
 
 
 @pytest.mark.parametrize(("name", "env_id"), sorted(SHIPPED.items()))

@@ -146,16 +146,16 @@ def test_command_line_names_a_missing_policy(tmp_path: Path) -> None:
 def test_command_line_on_a_shipped_bundle(tmp_path: Path) -> None:
     """A bundle's policies are pushed in their training environments with the bundle's own margin weights."""
     argv = [
-        "--bundled", "anymal_b_v1", "--impulses", "0", "--episodes", "1", "--directions", "lateral",
+        "--bundled", "anymal_b", "--impulses", "0", "--episodes", "1", "--directions", "lateral",
         "--forward-velocities", "0.75", "--recovery-s", "0.5", "--out", str(tmp_path),
     ]  # fmt: skip
     assert main(argv) == 0
     report = json.loads((tmp_path / "push_recovery.json").read_text())
     assert report["env_overrides"]["margin_weights"].endswith(".npz")
     for variant in report["variants"].values():
-        assert len(variant["policies"]) == 3
+        assert len(variant["policies"]) == 5
         assert variant["survival"]["lateral@0.75"]["mean"] == [1.0]  # no push: the bundled policies walk on
-        assert all(policy["training_forward_velocity"] == [0.75, 0.75] for policy in variant["policies"])
+        assert all(policy["training_forward_velocity"] == [0.2, 1.1] for policy in variant["policies"])
 
 
 def test_command_label_follows_the_policies_training_commands() -> None:

@@ -244,7 +244,12 @@ def main(argv: list[str] | None = None) -> int:
         "margin_runs": [str(run) for run in args.margin_runs or []],
         "env_overrides": env_overrides,
         "command": " ".join([Path(sys.executable).name, *sys.argv]),
-        "protocol": {**vars(args), "out": str(args.out), "push_seed": protocol.seed},
+        "protocol": {
+            **vars(args),
+            "out": str(args.out),
+            "margin_runs": [str(r) for r in args.margin_runs or []],
+            "push_seed": protocol.seed,
+        },
         "metrics": METRICS,
         "variants": {},
     }

@@ -25,6 +25,7 @@ from margin_rl.envs.terrain import (
 )
 from margin_rl.robot import mjcf_names as names
 from margin_rl.train.metrics import step_tags
+from tests.envs.test_terrain import _largest_neighbour_jump
 
 # 4 levels x 2 tiles of 4 m, no border: a 321 x 161 grid that builds in milliseconds.
 CURRICULUM = TerrainConfig(size=8.0, tile=4.0, border=0.0, curriculum_levels=4, initial_max_level=1)
@@ -33,10 +34,6 @@ PER_TILE = round(CURRICULUM.tile / CURRICULUM.resolution)
 
 def _row(heights: np.ndarray, level: int) -> np.ndarray:
     return heights[level * PER_TILE : (level + 1) * PER_TILE + 1]
-
-
-def _largest_neighbour_jump(heights: np.ndarray) -> float:
-    return float(max(np.abs(np.diff(heights, axis=0)).max(), np.abs(np.diff(heights, axis=1)).max()))
 
 
 def test_rows_rise_in_difficulty_from_flat_to_the_full_scale() -> None:

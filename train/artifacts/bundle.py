@@ -123,7 +123,7 @@ def load_bundle(name_or_path: str | Path) -> Bundle:
         for key in ("npz", "card"):
             _verify(folder, margin[key], margin[f"{key}_sha256"])
         margin_weights = folder / margin["npz"]
-        trained_with = {e["learned_margin"]["sha256"] for e in card["policies"] if e.get("learned_margin")}
+        trained_with = {e["learned_margin"]["sha256"] for e in card["policies"] if _margin_in_reward(e)}
         if trained_with - {margin["npz_sha256"]}:
             raise ValueError(
                 f"{folder / CARD_FILE}: policies were trained with learned-margin weights {sorted(trained_with)}, "
@@ -145,16 +145,24 @@ def _verify(folder: Path, relative: str, sha256: str) -> None:
         )
 
 
+def _margin_in_reward(entry: dict[str, Any]) -> bool:
+    """Whether a card entry's policy was rewarded with a learned margin: at margin weight 0 the network its
+    environment loaded only logged the margin, so a baseline may be bundled beside margin policies trained with
+    another network (its own identity stays recorded in its entry)."""
+    return bool(entry.get("learned_margin")) and float(entry["margin_weight"]) != 0.0
+
+
 def copy_margin_weights(entries: list[dict[str, Any]], folder: Path) -> dict[str, Any] | None:
-    """Copy the learned-margin weights (npz + card) that the runs in ``entries`` were trained with into
-    ``folder/learned_margin/``; returns the card record, or None when no run used a learned margin.
+    """Copy the learned-margin weights (npz + card) that the runs in ``entries`` were rewarded with into
+    ``folder/learned_margin/``; returns the card record, or None when no run's reward used a learned margin
+    (the runs at margin weight 0 do not count: :func:`_margin_in_reward`).
 
     Raises:
         ValueError: the runs used different weights (one bundle carries one margin model), or the weights
             changed since training (their checksum no longer matches the one recorded for the runs).
     """
     identities = {
-        (e["learned_margin"]["source"], e["learned_margin"]["sha256"]) for e in entries if e["learned_margin"]
+        (e["learned_margin"]["source"], e["learned_margin"]["sha256"]) for e in entries if _margin_in_reward(e)
     }
     if not identities:
         return None
@@ -201,8 +209,70 @@ def final_action_std(run_dir: Path) -> float | None:
     return None if value is None else float(value)
 
 
+REUSED_FACTS = (
+    "env_steps",
+    "training_sessions",
+    "steps_per_s_last_session",
+    "final_action_std",
+    "learned_margin",
+    "training_command",
+    "init_from",
+)
+"""The training facts a bundled policy brings from its card into a new bundle that reuses it."""
+
+
+def bundled_policy_entry(folder: str | Path) -> tuple[dict[str, Any], dict[str, Any]] | None:
+    """(card, the card's entry) when ``folder`` is one policy folder of a bundle (``<bundle>/<variant>__s<seed>``
+    holding the ``policy.pt`` and ``config.json`` its card lists), else None. Lets a new bundle reuse policies
+    that need no retraining (e.g. baselines, whose training never read the margin) with their training facts.
+
+    Raises:
+        ValueError: the folder is listed in its bundle's card but a file's checksum does not match.
+    """
+    folder = Path(folder)
+    card_file = folder.parent / CARD_FILE
+    if not ((folder / POLICY_FILE).is_file() and card_file.is_file()):
+        return None
+    card = read_json(card_file)
+    for entry in card.get("policies", []):
+        if Path(entry["policy"]).parent.name == folder.name:
+            for key in ("policy", "config"):
+                _verify(folder.parent, entry[key], entry[f"{key}_sha256"])
+            return card, entry
+    return None
+
+
+def _bundled_record(policy: Path, variant: str, weight: float) -> tuple[Path, Path, dict[str, Any]]:
+    """(TorchScript file, config.json, training facts) of a policy reused from another bundle (its card's facts,
+    and where it came from)."""
+    found = bundled_policy_entry(policy.parent)
+    if found is None:
+        raise ValueError(f"{policy} is neither in a training run nor listed in a bundle's {CARD_FILE}")
+    card, entry = found
+    if float(entry["margin_weight"]) != weight:
+        raise ValueError(
+            f"{policy} was trained at margin weight {entry['margin_weight']:g}, not the {weight:g} of {variant!r}"
+        )
+    facts = {
+        "variant": variant,
+        "margin_weight": weight,
+        "seed": int(entry["seed"]),
+        **{key: entry.get(key) for key in REUSED_FACTS},
+        "reused_from": {
+            "bundle": card["name"],
+            "commit": card.get("provenance", {}).get("commit"),
+            "policy": entry["policy"],
+        },
+    }
+    return policy, policy.parent / CONFIG_FILE, facts
+
+
 def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path, Path, dict[str, Any]]:
-    """(TorchScript file, config.json, training facts) of one compare run; clear error when unfinished."""
+    """(TorchScript file, config.json, training facts) of one compare run, or of a policy reused from a bundle
+    (:func:`bundled_policy_entry`); clear error when unfinished."""
+    if run.get("run_dir") is None:
+        policy, config, facts = _bundled_record(Path(run["policy"]), variant, weight)
+        return policy, config, {**facts, "metrics": run["metrics"]}
     run_dir = Path(run["run_dir"])
     policy, config = run_dir / TORCHSCRIPT_FILE, run_dir / CONFIG_FILE
     for path in (policy, config):
@@ -403,10 +473,15 @@ def card_markdown(card: dict[str, Any]) -> str:
         std = f"{e['final_action_std']:.3f}" if e.get("final_action_std") is not None else "not recorded"
         digest = e["policy_sha256"][:12]
         lines.append(f"| `{e['policy']}` | {e['margin_weight']:g} | {e['seed']} | {steps} | {std} | {digest} |")
-    commands = [e for e in card["policies"] if e.get("training_command")]
+    commands = [e for e in card["policies"] if e.get("training_command") or e.get("reused_from")]
     if commands and not p.get("trained_here", True):
         lines += ["", "Training commands (each run's `config.json`):", ""]
-        lines += [f"- `{e['policy']}`: `{e['training_command']}`" for e in commands]
+        lines += [
+            f"- `{e['policy']}`: "
+            + (f"`{e['training_command']}`" if e.get("training_command") else "not recorded")
+            + _reused_text(e)
+            for e in commands
+        ]
     if card.get("history"):
         lines += [
             "",
@@ -417,6 +492,17 @@ def card_markdown(card: dict[str, Any]) -> str:
         for earlier in card["history"]:
             lines += ["", *_history_markdown(earlier)]
     return "\n".join(lines) + "\n"
+
+
+def _reused_text(entry: dict[str, Any]) -> str:
+    """Where a reused policy was trained: its package commit and the learned margin its environment loaded."""
+    source = entry.get("reused_from")
+    if not source:
+        return ""
+    margin = entry.get("learned_margin")
+    weights = f", learned margin sha256 {margin['sha256'][:12]}" if margin else ""
+    commit = str(source.get("commit") or "?")[:12]
+    return f" (trained at package commit `{commit}`{weights}; reused from bundle `{source['bundle']}`)"
 
 
 def policy_seeds(policies: list[dict[str, Any]]) -> dict[str, list[int]]:

@@ -36,7 +36,11 @@ cell's variants and statistics, as for the main cell) and a table with one row p
 evaluated before for the same request (policy checksum, options, episodes, seeds: ``request.json``) is reused.
 
 ``--runs RUN_DIR ...`` trains nothing and evaluates finished runs (margin weight 0 and one other weight, e.g. runs
-trained one by one with ``train``) exactly like its own.
+trained one by one with ``train``) exactly like its own. A bundled policy folder counts as a finished run, so a
+new bundle can reuse policies that need no retraining (baselines, whose training never read the margin network)::
+
+    python -m margin_rl.train compare --runs train/bundled/anymal_c/without_margin__s0 ... runs/c_margin_s0 ... \
+        --bundle train/bundled/anymal_c
 
 Push recovery of the same policies: :mod:`margin_rl.train.commands.push_recovery` (``--bundled NAME`` or ``--variant``).
 
@@ -69,7 +73,7 @@ from margin_rl.provenance import git_commit, sha256_file
 from margin_rl.train.analysis.conditions import CONDITIONS, DEFAULT_CONDITION, check_condition
 from margin_rl.train.analysis.media import plot_accelerations
 from margin_rl.train.analysis.significance import RESAMPLES, compare_variants, difference_table, grid_table
-from margin_rl.train.artifacts.bundle import load_bundle, write_bundle
+from margin_rl.train.artifacts.bundle import POLICY_FILE, bundled_policy_entry, load_bundle, write_bundle
 from margin_rl.train.commands.evaluate import DEFAULT_FORWARD_VELOCITY, Evaluation, evaluate
 from margin_rl.train.commands.options import (
     CLI_MARGIN_WEIGHT,
@@ -461,7 +465,10 @@ def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
 
 def variants_of_runs(runs: list[Path]) -> tuple[str, dict[str, tuple[float, list[tuple[int, Path]]]]]:
     """(environment id, variants) of finished training runs: margin weight 0 is "without margin", the one other
-    weight "with margin", each run's seed from its ``config.json``.
+    weight "with margin", each run's seed from its ``config.json``. A bundle's policy folder
+    (``<bundle>/<variant>__s<seed>``) counts as a finished run: its TorchScript actor is evaluated, and a bundle
+    written from the comparison carries the facts of its training from the source card
+    (:func:`~margin_rl.train.artifacts.bundle.bundled_policy_entry`).
 
     Raises:
         ValueError: a run that is not finished, runs of several environments, or not exactly one nonzero weight.
@@ -470,12 +477,19 @@ def variants_of_runs(runs: list[Path]) -> tuple[str, dict[str, tuple[float, list
     env_ids = set()
     for run in runs:
         config, progress = run / CONFIG_FILE, run / PROGRESS_FILE
-        if not (config.is_file() and progress.is_file() and read_json(progress).get("finished")):
-            raise ValueError(f"--runs {run}: not a finished training run (no config.json, or progress not finished)")
+        if bundled_policy_entry(run) is not None:
+            policy = run / POLICY_FILE
+        elif config.is_file() and progress.is_file() and read_json(progress).get("finished"):
+            policy = run / final_model_name(read_json(config)["backend"])
+        else:
+            raise ValueError(
+                f"--runs {run}: not a finished training run (no config.json, or progress not finished), nor a "
+                "bundled policy folder (<bundle>/<variant>__s<seed>)"
+            )
         data = read_json(config)
         env_ids.add(data["env_id"])
         weight = float(data["env_config"]["margin_weight"])
-        found.setdefault(weight, []).append((int(data["seed"]), run / final_model_name(data["backend"])))
+        found.setdefault(weight, []).append((int(data["seed"]), policy))
     weights = sorted(found)
     if len(env_ids) != 1 or len(weights) != 2 or weights[0] != 0.0:
         raise ValueError(

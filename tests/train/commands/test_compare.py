@@ -213,16 +213,72 @@ def test_bundle_refuses_margin_weights_changed_since_training(tmp_path: Path, to
     save_weights(random_weights(seed=2), weights, {"robot": "toy"})
     sha = json.loads(weights.with_suffix(".json").read_text())["sha256"]
     trained_with = {"source": str(weights.with_suffix(".npz")), "sha256": sha}
-    entries = [{"learned_margin": trained_with}, {"learned_margin": None}]
+    entries = [{"learned_margin": trained_with, "margin_weight": 0.1}, {"learned_margin": None, "margin_weight": 0.1}]
     record = copy_margin_weights(entries, tmp_path)
     assert record is not None and record["npz_sha256"] == sha and (tmp_path / record["npz"]).is_file()
-    assert copy_margin_weights([{"learned_margin": None}], tmp_path) is None
+    assert copy_margin_weights([{"learned_margin": None, "margin_weight": 0.1}], tmp_path) is None
+    # a baseline (weight 0) whose environment loaded another network: it never entered that policy's reward
+    baseline = {"learned_margin": {"source": toy_weights, "sha256": "x"}, "margin_weight": 0.0}
+    assert copy_margin_weights([*entries, baseline], tmp_path) == record
+    assert copy_margin_weights([baseline], tmp_path) is None
     save_weights(random_weights(seed=3), weights, {"robot": "toy"})
     with pytest.raises(ValueError, match="changed since the runs were trained"):
         copy_margin_weights(entries, tmp_path)
-    other = {"learned_margin": {"source": toy_weights, "sha256": "x"}}
+    other = {"learned_margin": {"source": toy_weights, "sha256": "x"}, "margin_weight": 0.2}
     with pytest.raises(ValueError, match="different learned-margin weights"):
         copy_margin_weights([*entries, other], tmp_path)
+
+
+def test_new_bundle_reuses_a_bundled_baseline_trained_with_another_network(tmp_path: Path, toy_weights: str) -> None:
+    """compare --runs takes a bundle's policy folder as a finished run: the new bundle carries the margin network
+    of its margin policies, keeps the reused baseline's own network and training facts in its entry, evaluates it
+    to the same metrics as in its first bundle (the margin column aside: another network measures it), and
+    refuses a reused folder whose file was changed."""
+    from margin_rl.stability.learned.model import save_weights
+    from margin_rl.train.artifacts.bundle import CARD_FILE, load_bundle
+    from margin_rl.train.commands.compare import variants_of_runs
+    from tests.stability.learned.test_model import random_weights
+
+    newer = tmp_path / "newer"
+    save_weights(random_weights(seed=4), newer, {"robot": "toy"})
+    common = [
+        "--backend", "rsl", "--seeds", "1", "--num-envs", "8", "--total-steps", "192", "--eval-episodes", "2",
+        "--warmup-s", "0.1", "--margin-weight", "2", "--env-option", "episode_length_s=0.4", "--no-progress",
+        "--eval-commands", "1.0",
+    ]  # fmt: skip
+    old_bundle, new_out = tmp_path / "old_bundle", tmp_path / "new"
+    old_args = ["--margin-weights", toy_weights, "--out", str(tmp_path / "old"), "--bundle", str(old_bundle)]
+    assert main([*common, *old_args]) == 0
+    assert main([*common, "--margin-weights", str(newer.with_suffix(".npz")), "--out", str(new_out)]) == 0
+    baseline, margin_run = old_bundle / "without_margin__s0", new_out / "runs" / "mw2__s0"
+    bundle_dir, out = tmp_path / "release", tmp_path / "release_eval"
+    assert main(["--runs", str(baseline), str(margin_run), "--eval-episodes", "2", "--warmup-s", "0.1",
+                 "--eval-commands", "1.0", "--out", str(out), "--bundle", str(bundle_dir)]) == 0  # fmt: skip
+
+    bundle = load_bundle(bundle_dir)  # the baseline's other network is not a mismatch: weight 0
+    card = json.loads((bundle_dir / CARD_FILE).read_text())
+    newer_sha = json.loads(newer.with_suffix(".json").read_text())["sha256"]
+    assert card["learned_margin_weights"]["npz_sha256"] == newer_sha
+    old_card = json.loads((old_bundle / CARD_FILE).read_text())
+    old_entry = next(e for e in old_card["policies"] if e["margin_weight"] == 0)
+    reused = next(e for e in card["policies"] if e["margin_weight"] == 0)
+    assert reused["learned_margin"] == old_entry["learned_margin"] != card["policies"][1]["learned_margin"]
+    assert reused["reused_from"] == {
+        "bundle": "old_bundle",
+        "commit": old_card["provenance"]["commit"],
+        "policy": "without_margin__s0/policy.pt",
+    }
+    assert reused["env_steps"] == old_entry["env_steps"] and reused["final_action_std"] == old_entry["final_action_std"]
+    assert reused["policy_sha256"] == old_entry["policy_sha256"]
+    assert "reused from bundle `old_bundle`" in (bundle_dir / "CARD.md").read_text()
+    before, after = old_card["table"]["without margin"]["mean"], card["table"]["without margin"]["mean"]
+    for key in ("lin_acc_rms", "ang_acc_rms", "velocity_error_mean", "stance_width_mean", "fell"):
+        assert after[key] == pytest.approx(before[key], rel=1e-6, abs=1e-9), key
+    assert bundle.variants()["with margin"][0] == 2.0
+
+    (baseline / "policy.pt").write_bytes((baseline / "policy.pt").read_bytes() + b"\0")
+    with pytest.raises(ValueError, match=r"policy\.pt: checksum mismatch"):
+        variants_of_runs([baseline, margin_run])
 
 
 def test_unknown_bundle_is_a_clear_error(tmp_path: Path) -> None:

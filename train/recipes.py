@@ -5,7 +5,8 @@ parallel environments, steps and PPO options. The comparison of seed 000 §V-C t
 and "with margin" (the recipe's ``margin_weight``) with the same recipe, so every added term and every
 randomisation applies to both variants.
 
-``train --recipe NAME`` and ``compare --recipe NAME`` start from a recipe; any option given on the command line
+``train`` and ``compare`` start from :data:`SHIPPED_RECIPE` (``robust``, what the shipped bundles were trained
+with), or the recipe ``--recipe NAME`` names (``--recipe none``: no recipe); any option given on the command line
 (``--num-envs``, ``--total-steps``, ``--env-option``, ``--ppo-option``, ``--margin-weight``) replaces the recipe's.
 The recipe's name is written into the run's ``config.json``.
 
@@ -30,7 +31,7 @@ The recipe's name is written into the run's ``config.json``.
   weight re-swept"). On ANYmal C, five seeds at 0.1 lower both accelerations in every cell but survive lateral
   pushes from 45 N s less often than the baselines (same section); weight 0.5 on C (three seeds) keeps lateral
   survival at 45 N s but misses the acceleration significance and the falls tolerance, so 0.1 stays. The shipped
-  robust bundles were trained at 0.2 before and keep it (their ``config.json``).
+  robust bundles trained at 0.2 before are in the bundles' card history.
 * ``rough`` — the robust recipe on the paper's setting, rough ground, with what the field's rough-terrain ANYmal tasks
   (legged_gym, Isaac Lab) add to their flat ones: the terrain curriculum (``CURRICULUM_TERRAIN``: 9 rows of the 8
   tile types up to Fig. 8's 6-18 cm steps and 15 degree inclines), the actor's height scan (a perceptive policy)
@@ -143,6 +144,13 @@ RECIPES: dict[str, TrainingRecipe] = {
     )
 }
 """The recipes by name (see the module docstring)."""
+
+SHIPPED_RECIPE = "robust"
+"""The recipe the shipped flat-ground bundles were trained with, so the one ``train`` and ``compare`` start from
+unless ``--recipe`` names another (or ``none``: the environment's options one by one)."""
+NO_RECIPE = "none"
+"""``--recipe none``: no recipe; the environment id's own options, each command's own environment and step counts,
+and the command line's training defaults (:mod:`margin_rl.train.commands.options`)."""
 
 
 def get_recipe(name: str) -> TrainingRecipe:

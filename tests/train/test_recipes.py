@@ -48,7 +48,10 @@ def test_options_given_replace_the_recipes() -> None:
 
 def test_fixed_command_recipe_is_the_knee_term_experiment() -> None:
     recipe = _spec("--recipe", "fixed_command", "--margin-weight", "0.2")
-    by_hand = _spec("--num-envs", "128", "--total-steps", "5000000", "--env-option", "reward_params.knee_clearance=5")
+    by_hand = _spec(
+        "--recipe", "none", "--margin-weight", "0.2", "--num-envs", "128", "--total-steps", "5000000",
+        "--env-option", "reward_params.knee_clearance=5",
+    )  # fmt: skip
     assert recipe.env_config == by_hand.env_config and recipe.num_envs == 128 and recipe.total_steps == 5_000_000
 
 
@@ -76,7 +79,7 @@ def test_bad_recipes_are_clear_errors(capsys: pytest.CaptureFixture[str]) -> Non
 def test_robust_recipe_trains_without_an_entropy_bonus_on_both_backends(backend: str, field: str) -> None:
     spec = _spec("--recipe", "robust", "--backend", backend)
     assert getattr(spec.ppo, field) == 0.0
-    assert getattr(_spec("--backend", backend).ppo, field) == 0.01  # the backend default stays legged_gym's
+    assert getattr(_spec("--recipe", "none", "--backend", backend).ppo, field) == 0.01  # the backend's: legged_gym's
     given = _spec("--recipe", "robust", "--backend", backend, "--ppo-option", f"{field}=0.005")
     assert getattr(given.ppo, field) == 0.005  # an option given replaces the recipe's
     assert train_module.TrainSpec.from_json(spec.to_json()) == spec

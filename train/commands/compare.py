@@ -9,9 +9,9 @@ Example::
 For the ANYmal ids, ``--margin-weight`` defaults to 0.2 and ``--env-option reward_params.alive_bonus`` to 0.1 for
 both variants: the shipped experiment (see :mod:`margin_rl.train.commands.options`).
 
-``--recipe NAME`` trains both variants with a training recipe of :mod:`margin_rl.train.recipes` (its environment
-options, environments, steps, PPO options and margin weight; options given here replace the recipe's), e.g.
-``--recipe robust``.
+Both variants train with a training recipe of :mod:`margin_rl.train.recipes` (its environment options,
+environments, steps, PPO options and margin weight; options given here replace the recipe's): the shipped bundles'
+``robust`` unless ``--recipe NAME`` names another (``--recipe none``: none).
 
 For each variant (margin weight 0, and ``--margin-weight``) and each training seed, a run is trained into
 ``<out>/runs/mw<weight>__s<seed>`` (a finished run is reused, a stopped one resumed), then evaluated on the same
@@ -79,13 +79,15 @@ from margin_rl.train.commands.options import (
     CLI_MARGIN_WEIGHT,
     DEFAULTS_HELP,
     add_env_arguments,
+    add_recipe_argument,
     env_overrides,
+    recipe_of,
     with_training_defaults,
 )
 from margin_rl.train.commands.train import DEFAULT_BACKEND, DEFAULT_NUM_ENVS, TrainSpec, load_spec, make_spec, train
 from margin_rl.train.environments import DEFAULT_ENV
 from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
-from margin_rl.train.recipes import RECIPES, get_recipe, with_recipe
+from margin_rl.train.recipes import get_recipe, with_recipe
 from margin_rl.train.runs import (
     CONFIG_FILE,
     PROGRESS_FILE,
@@ -206,9 +208,10 @@ def evaluate_variants(
     ``<out>/eval_grid/<variant>__s<seed>/<cell>``), each with its variants and statistics in ``report["grid"]``.
     """
     out = Path(out)
-    report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": dict(env_options or {})}
+    # recipes' and --terrain-difficulty's options are config dataclasses: recorded as JSON gives them back
+    report: dict[str, Any] = {"settings": _settings_json(settings), "env_options": _json_ready(dict(env_options or {}))}
     if eval_env_overrides:
-        report["eval_env_overrides"] = dict(eval_env_overrides)
+        report["eval_env_overrides"] = _json_ready(dict(eval_env_overrides))
     main_cell = (DEFAULT_CONDITION, settings.forward_velocity)
     report["variants"], examples = _evaluate_cell(variants, settings, out, eval_env_overrides, main_cell)
     report.update(_variant_statistics(report["variants"]))
@@ -376,12 +379,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--margin-weight",
         type=float,
         default=None,
-        help=f"weight of the margin variant (default {CLI_MARGIN_WEIGHT:g}, or the recipe's); {DEFAULTS_HELP}",
+        help=f"weight of the margin variant (default the recipe's, {CLI_MARGIN_WEIGHT:g} without); {DEFAULTS_HELP}",
     )
-    parser.add_argument(
-        "--recipe",
-        choices=tuple(RECIPES),
-        help="train both variants with a training recipe (margin_rl.train.recipes); options given here replace its",
+    add_recipe_argument(
+        parser, "train both variants with a training recipe (margin_rl.train.recipes); options given here replace its"
     )
     parser.add_argument("--seeds", type=int, default=len(d.seeds), help="number of training seeds (0, 1, ...)")
     parser.add_argument("--num-envs", type=int, help=f"environments (default {d.num_envs}, or the recipe's)")
@@ -442,7 +443,7 @@ def _eval_overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
     d = CompareSettings()
-    recipe = get_recipe(args.recipe) if args.recipe is not None else None
+    recipe = recipe_of(args.recipe)
     return CompareSettings(
         env_id=args.env or DEFAULT_ENV,
         backend=args.backend,
@@ -456,7 +457,7 @@ def _settings_from_args(args: argparse.Namespace) -> CompareSettings:
         seeds=tuple(range(args.seeds)),
         num_envs=args.num_envs or (recipe.num_envs if recipe else d.num_envs),
         total_steps=args.total_steps or (recipe.total_steps if recipe else d.total_steps),
-        recipe=args.recipe,
+        recipe=recipe.name if recipe else None,
         checkpoint_every=args.checkpoint_every,
         device=args.device,
         **_eval_overrides(args),

@@ -3,11 +3,12 @@
 :func:`add_env_arguments` adds the options that shape the environment, :func:`env_overrides` turns them into
 EnvConfig field overrides.
 
-Training defaults of the command line (``train`` and ``compare``): the experiment of the first comparison (its
-numbers are in the bundles' card history), margin weight :data:`CLI_MARGIN_WEIGHT` and
-``reward_params.alive_bonus`` :data:`CLI_ALIVE_BONUS` (:func:`with_training_defaults`). ``EnvConfig``'s own
-defaults (the paper's reward: weight 1, no bonus) stay what the Python API and the environments use: with them, a
-trot's negative learned margin makes every step's reward negative and PPO learns to fall.
+Training defaults of the command line (``train`` and ``compare``): the shipped bundles' experiment, the recipe
+:data:`~margin_rl.train.recipes.SHIPPED_RECIPE` (:func:`add_recipe_argument`, ``--recipe none`` for none) with its
+margin weight (:data:`CLI_MARGIN_WEIGHT`, also the weight without a recipe) and ``reward_params.alive_bonus``
+:data:`CLI_ALIVE_BONUS` (:func:`with_training_defaults`). ``EnvConfig``'s own defaults (the paper's reward: weight 1,
+no bonus) stay what the Python API and the environments use: with them, a trot's negative learned margin makes every
+step's reward negative and PPO learns to fall.
 """
 
 from __future__ import annotations
@@ -20,17 +21,36 @@ from margin_rl.envs.margin_kinds import MARGIN_KINDS
 from margin_rl.envs.terrain import TerrainConfig, at_difficulty
 from margin_rl.train.config import parse_assignments
 from margin_rl.train.environments import DEFAULT_ENV, anymal_id
+from margin_rl.train.recipes import NO_RECIPE, RECIPES, SHIPPED_RECIPE, TrainingRecipe, get_recipe
 
-CLI_MARGIN_WEIGHT = 0.2
-"""Margin-reward weight of ``train`` (and of ``compare``'s margin variant) unless ``--margin-weight`` is given."""
+CLI_MARGIN_WEIGHT = RECIPES[SHIPPED_RECIPE].margin_weight
+"""Margin-reward weight of ``train`` (and of ``compare``'s margin variant) unless ``--margin-weight`` is given: the
+shipped recipe's, with or without a recipe (another recipe brings its own)."""
 CLI_ALIVE_BONUS = 0.1
 """``reward_params.alive_bonus`` of ``train`` and ``compare`` unless ``--env-option reward_params.alive_bonus=...``
 (or a ``reward_params`` mapping naming ``alive_bonus``) is given."""
 DEFAULTS_HELP = (
-    f"the shipped experiment: --margin-weight {CLI_MARGIN_WEIGHT:g} and "
-    f"--env-option reward_params.alive_bonus={CLI_ALIVE_BONUS:g} (EnvConfig's own defaults, weight 1 and no bonus, "
-    "make PPO learn to fall)"
+    f"the shipped bundles' experiment: --recipe {SHIPPED_RECIPE} (--recipe {NO_RECIPE} for none), its --margin-weight "
+    f"{CLI_MARGIN_WEIGHT:g} and --env-option reward_params.alive_bonus={CLI_ALIVE_BONUS:g} (EnvConfig's own defaults, "
+    "weight 1 and no bonus, make PPO learn to fall)"
 )
+
+
+def add_recipe_argument(parser: argparse.ArgumentParser, help_text: str) -> None:
+    """``--recipe NAME`` (default :data:`~margin_rl.train.recipes.SHIPPED_RECIPE`; ``none``: no recipe)."""
+    parser.add_argument(  # no argparse default: --resume tells a given --recipe from none given
+        "--recipe",
+        choices=(*RECIPES, NO_RECIPE),
+        help=f"{help_text} (default {SHIPPED_RECIPE}, the shipped bundles'; {NO_RECIPE}: no recipe)",
+    )
+
+
+def recipe_of(name: str | None) -> TrainingRecipe | None:
+    """The recipe of ``--recipe NAME``: :data:`~margin_rl.train.recipes.SHIPPED_RECIPE` when not given, None for
+    ``none``."""
+    if name == NO_RECIPE:
+        return None
+    return get_recipe(SHIPPED_RECIPE if name is None else name)
 
 
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:

@@ -73,7 +73,7 @@ from margin_rl.train.environments import (
     env_target,
     margin_identity,
 )
-from margin_rl.train.recipes import RECIPES, get_recipe, with_recipe
+from margin_rl.train.recipes import get_recipe, with_recipe
 from margin_rl.train.runs import (
     CONFIG_FILE,
     PROGRESS_FILE,
@@ -479,7 +479,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--margin-weight",
         type=float,
-        help=f"weight of the margin reward term (0: baseline; default {cli.CLI_MARGIN_WEIGHT:g})",
+        help=f"weight of the margin reward term (0: baseline; default the recipe's, {cli.CLI_MARGIN_WEIGHT:g} without)",
     )
     parser.add_argument("--seed", type=int, default=None, help=f"random seed (default {DEFAULT_SEED})")
     parser.add_argument("--num-envs", type=int, default=None, help=f"parallel environments ({DEFAULT_NUM_ENVS})")
@@ -488,10 +488,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--checkpoint-every", type=int, default=None, help=f"steps between checkpoints ({DEFAULT_CHECKPOINT_EVERY})"
     )
     parser.add_argument("--ppo-option", action="append", metavar="KEY=VALUE", help="PPO config field (repeatable)")
-    parser.add_argument(
-        "--recipe",
-        choices=tuple(RECIPES),
-        help="start from a training recipe (margin_rl.train.recipes): its environment options, --num-envs, "
+    cli.add_recipe_argument(
+        parser,
+        "start from a training recipe (margin_rl.train.recipes): its environment options, margin weight, --num-envs, "
         "--total-steps and PPO options, each replaced by the option given here",
     )
     parser.add_argument("--run-dir", type=Path, help="run directory (default: <runs-root>/<generated name>)")
@@ -595,7 +594,7 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         return spec, args.resume, True
     env_id = args.env or DEFAULT_ENV
     backend = args.backend or DEFAULT_BACKEND
-    recipe = get_recipe(args.recipe) if args.recipe is not None else None
+    recipe = cli.recipe_of(args.recipe)
     run = {
         "seed": DEFAULT_SEED if args.seed is None else args.seed,
         "num_envs": args.num_envs or (recipe.num_envs if recipe else DEFAULT_NUM_ENVS),
@@ -603,7 +602,7 @@ def spec_from_args(args: argparse.Namespace) -> tuple[TrainSpec, Path, bool]:
         "checkpoint_every": args.checkpoint_every or DEFAULT_CHECKPOINT_EVERY,
         "device": args.device or "cpu",
         "init_from": args.init_from,
-        "recipe": args.recipe,
+        "recipe": recipe.name if recipe else None,
     }
     overrides = cli.env_overrides(args)
     ppo_overrides = parse_assignments(args.ppo_option, "--ppo-option")

@@ -24,6 +24,8 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
     assert main(args) == 0
     report = json.loads((out / "compare.json").read_text())
     assert set(report["variants"]) == {"without margin", "with margin"}
+    # no --recipe: the shipped recipe, its options recorded as JSON (config dataclasses as mappings)
+    assert report["settings"]["recipe"] == "robust" and report["env_options"]["randomization"]["push_interval_s"] == 8
     assert report["variants"]["without margin"]["margin_weight"] == 0.0
     assert report["variants"]["with margin"]["margin_weight"] == 2.0
     for variant in report["variants"].values():

@@ -148,8 +148,20 @@ def _spec(*argv: str) -> train_module.TrainSpec:
 
 
 def test_cli_defaults_are_the_shipped_experiment() -> None:
-    config = _spec().env_config  # margin_rl/AnymalB-v1: --margin-weight 0.2 --env-option reward_params.alive_bonus=0.1
-    assert config.margin_weight == 0.2 and config.reward_params.alive_bonus == 0.1
+    """No --recipe is the shipped bundles' recipe with its weight; --recipe none keeps that weight, the bare
+    environment and the command's own sizes; the bundles' runs are reproduced by their recorded commands."""
+    from margin_rl.train.recipes import RECIPES, SHIPPED_RECIPE
+
+    shipped = RECIPES[SHIPPED_RECIPE]
+    spec = _spec()  # margin_rl/AnymalB-v1 with the shipped recipe and --env-option reward_params.alive_bonus=0.1
+    assert spec.recipe == SHIPPED_RECIPE and spec == _spec("--recipe", SHIPPED_RECIPE)
+    assert spec.env_config.margin_weight == shipped.margin_weight and spec.num_envs == shipped.num_envs
+    assert spec.env_config.randomization == shipped.env_options["randomization"]
+    bare = _spec("--recipe", "none")
+    assert bare.recipe is None and bare.env_config.margin_weight == shipped.margin_weight
+    assert bare.num_envs == train_module.DEFAULT_NUM_ENVS and bare.env_config.randomization.push_interval_s is None
+    config = spec.env_config
+    assert config.reward_params.alive_bonus == 0.1
     argv = ("--env", "margin_rl/AnymalC-v1", "--margin-weight", "0", "--env-option", "reward_params.alive_bonus=0")
     config = _spec(*argv).env_config
     assert config.margin_weight == 0.0 and config.reward_params.alive_bonus == 0.0  # given values win
@@ -159,7 +171,9 @@ def test_cli_defaults_are_the_shipped_experiment() -> None:
     # the Python API keeps EnvConfig's
     assert train_module.make_spec().env_config.margin_weight == 1.0
     helptext = train_module.build_parser().format_help()
-    assert "--margin-weight 0.2" in helptext and "reward_params.alive_bonus=0.1" in helptext
+    assert f"--recipe {SHIPPED_RECIPE}" in helptext and "reward_params.alive_bonus=0.1" in helptext
+    with pytest.raises(SystemExit):  # --resume continues the run's own recipe: naming one is refused
+        train_module.main(["--resume", "runs/x", "--recipe", "none"])
 
 
 def test_compare_cli_defaults_are_the_shipped_experiment() -> None:
@@ -167,7 +181,9 @@ def test_compare_cli_defaults_are_the_shipped_experiment() -> None:
     from margin_rl.train.commands.options import with_training_defaults
 
     settings = _settings_from_args(build_parser().parse_args([]))
-    assert settings.margin_weight == 0.2 and settings.num_envs == 128 and settings.recipe is None
+    assert settings.recipe == "robust" and settings.margin_weight == 0.1 and settings.num_envs == 512
+    bare = _settings_from_args(build_parser().parse_args(["--recipe", "none"]))
+    assert bare.recipe is None and bare.margin_weight == 0.1 and bare.num_envs == 128
     robust = _settings_from_args(build_parser().parse_args(["--recipe", "robust", "--total-steps", "1000"]))
     assert robust.recipe == "robust" and robust.num_envs == 512 and robust.total_steps == 1000
     assert "reward_params.alive_bonus=0.1" in build_parser().format_help()

@@ -32,6 +32,24 @@ def test_a_run_stored_under_a_retired_id_is_read_as_the_current_one() -> None:
     assert spec.env_config.margin_weight == 0.2 and spec.num_envs == 128 and spec.total_steps == 5_000_000
 
 
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_every_bundled_policys_training_command_rebuilds_its_config(name: str) -> None:
+    """Re-running the command a card records for a policy trains that policy's run again: the spec it parses to
+    today is the one its stored config.json loads as (environment, PPO, sizes, seed, recipe; fields added to the
+    configs since default to what the run had)."""
+    import shlex
+
+    from margin_rl.train.commands.train import TrainSpec, build_parser, spec_from_args
+
+    bundle = load_bundle(name)
+    for entry in bundle.card["policies"]:
+        program, *argv = shlex.split(entry["training_command"])
+        assert program == "margin-rl-train", entry["training_command"]
+        rebuilt, _, resume = spec_from_args(build_parser().parse_args(argv))
+        stored = TrainSpec.from_json(json.loads((bundle.path / entry["config"]).read_text()))
+        assert not resume and rebuilt.to_json() == stored.to_json(), entry["policy"]
+
+
 @pytest.mark.parametrize(("name", "env_id"), sorted(SHIPPED.items()))
 def test_bundle_is_shipped_with_both_variants_and_several_seeds(name: str, env_id: str) -> None:
     assert name in bundled_names()

@@ -14,6 +14,10 @@ over seeds (the ``compare`` report's statistics, recomputed nowhere). **Pushes**
 robot and direction, survival "without → with" (mean over seeds) at each impulse of ``--impulses`` with Welch's p
 over seeds of the per-seed survival (:func:`margin_rl.train.analysis.significance.compare_seeds`). p < 0.05 is
 printed in bold.
+
+``--per-robot lateral:45 longitudinal:75`` prints instead one table per robot, the README's: a column per command, a
+row per measure (falls, velocity error, accelerations, stance width, push survival at the pushes named, the model
+mismatch conditions summarised), each with its p.
 """
 
 from __future__ import annotations
@@ -110,6 +114,94 @@ def push_rows(robot: str, report: dict[str, Any], command: float, impulses: list
     return rows
 
 
+ROBOT_TABLE_METRICS = (
+    ("velocity error [m/s]", "velocity_error_mean", ".3f", False),
+    ("base lin. acc. RMS [m/s²]", "lin_acc_rms", ".2f", True),
+    ("base ang. acc. RMS [rad/s²]", "ang_acc_rms", ".0f", True),
+    ("stance width [m]", "stance_width_mean", ".3f", True),
+)
+"""(row label, metric, format, show the relative change) of :func:`robot_table`'s flat-ground rows."""
+FALLS_TOLERANCE = 0.01
+"""The comparison's falls tolerance: the margin variant falls in no more than the baseline's share + 1 point."""
+
+
+def _change_text(a: float, b: float, fmt: str, stats: dict[str, Any], relative: bool) -> str:
+    change = ""
+    if relative and stats.get("relative") is not None:
+        change = f"{'−' if stats['relative'] < 0 else '+'}{abs(stats['relative']):.0%}, ".replace("%", " %")
+    return f"{a:{fmt}} → {b:{fmt}} ({change}{_p_text(stats['p_value'])})"
+
+
+def _push_survival(push: dict[str, Any], direction: str, command: float, impulse: float) -> str:
+    per_seed = []
+    for name in VARIANTS:
+        values = []
+        for policy in push["variants"][name]["policies"]:
+            curve = next(
+                c
+                for c in policy["curves"]
+                if c["direction"] == direction and abs(c["forward_velocity"] - command) < 1e-9
+            )
+            values.append(curve["survival"][curve["impulses"].index(impulse)])
+        per_seed.append(values)
+    test = compare_seeds(f"survival at {impulse:g} N s", per_seed[0], per_seed[1], names=VARIANTS)
+    return f"{test.mean_a:.2f} → {test.mean_b:.2f} ({_p_text(test.p_value)})"
+
+
+def _signed_percent(fraction: float) -> str:
+    return f"{'−' if fraction < 0 else '+'}{abs(fraction) * 100:.0f} %"
+
+
+def _mismatch_text(report: dict[str, Any], command: float) -> str:
+    """The off-nominal cells at ``command``: how many keep the falls tolerance, the linear-acceleration change's
+    range and how many of those changes have p < 0.05."""
+    cells = [
+        c for c in report["grid"] if c["condition"] != DEFAULT_CONDITION and abs(c["forward_velocity"] - command) < 1e-9
+    ]
+    if not cells:
+        return "–"
+    falls = [[c["variants"][name]["mean"]["fell"] for name in VARIANTS] for c in cells]
+    kept = sum(with_margin <= without + FALLS_TOLERANCE + 1e-12 for without, with_margin in falls)
+    changes = sorted(c["statistics"]["lin_acc_rms"]["relative"] for c in cells)
+    significant = sum((c["statistics"]["lin_acc_rms"]["p_value"] or 1.0) < 0.05 for c in cells)
+    return (
+        f"falls within +1 pt in {kept} / {len(cells)}; lin. acc. {_signed_percent(changes[-1])} to "
+        f"{_signed_percent(changes[0])} (p < 0.05 in {significant} / {len(cells)})"
+    )
+
+
+def robot_table(report: dict[str, Any], push: dict[str, Any], pushes: list[tuple[str, float]]) -> list[str]:
+    """One robot's table for the README: a column per evaluated command, a row per measure ("without → with",
+    mean over seeds, the relative change where it reads as one, Welch's p over seeds): falls (counts over all
+    episodes), the flat-ground metrics, push survival at each (direction, impulse) of ``pushes``, and the model
+    mismatch conditions summarised (:func:`_mismatch_text`)."""
+    cells = nominal_cells(report)
+    commands = [c["forward_velocity"] for c in cells]
+    episodes = int(report["settings"]["eval_episodes"])
+    lines = [
+        "| " + " | ".join(["with the margin, five seeds per variant", *(f"{v:g} m/s" for v in commands)]) + " |",
+        "|---|" + "---|" * len(commands),
+        "| falls (episodes) | " + " | ".join(falls_text(c, report["seeds"], episodes) for c in cells) + " |",
+    ]
+    for label, metric, fmt, relative in ROBOT_TABLE_METRICS:
+        values = []
+        for cell in cells:
+            a, b = (cell["variants"][name]["mean"][metric] for name in VARIANTS)
+            values.append(_change_text(a, b, fmt, cell["statistics"][metric], relative))
+        lines.append(f"| {label} | " + " | ".join(values) + " |")
+    for direction, impulse in pushes:
+        values = [
+            _push_survival(push, direction, v, impulse) if v in push["protocol"]["forward_velocities"] else "–"
+            for v in commands
+        ]
+        lines.append(f"| {direction} push {impulse:g} N s, survived | " + " | ".join(values) + " |")
+    conditions = sorted({c["condition"] for c in report["grid"]} - {DEFAULT_CONDITION})
+    if conditions:
+        label = f"model mismatch ({', '.join(conditions)})"
+        lines.append(f"| {label} | " + " | ".join(_mismatch_text(report, v) for v in commands) + " |")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument(
@@ -122,11 +214,24 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--push-command", type=float, default=0.75, help="command of the push table [m/s]")
     parser.add_argument("--impulses", type=float, nargs="+", default=[30.0, 45.0, 60.0, 75.0])
+    parser.add_argument(
+        "--per-robot",
+        nargs="+",
+        metavar="DIRECTION:IMPULSE",
+        help="print one table per robot instead (a column per command, a row per measure), with push survival at "
+        "these pushes, e.g. lateral:45 longitudinal:75",
+    )
     args = parser.parse_args(argv)
     loaded = [
         (label, as_report(json.loads(Path(c).read_text())), json.loads(Path(p).read_text()))
         for label, c, p in args.robot
     ]
+    if args.per_robot:
+        pushes = [(d, float(i)) for d, i in (item.split(":") for item in args.per_robot)]
+        for label, compare, push in loaded:
+            print(f"{label}:\n")
+            print("\n".join(robot_table(compare, push, pushes)) + "\n")
+        return 0
     for _, _, push in loaded:
         missing = [i for i in args.impulses if i not in push["protocol"]["impulses"]]
         if missing or args.push_command not in push["protocol"]["forward_velocities"]:

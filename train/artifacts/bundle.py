@@ -267,6 +267,15 @@ def _bundled_record(policy: Path, variant: str, weight: float) -> tuple[Path, Pa
     return policy, policy.parent / CONFIG_FILE, facts
 
 
+def _command_text(command: list[str]) -> str | None:
+    """A run's recorded command line as a user types it: the program by its name, not the path it was started by
+    (runs recorded before ``train`` wrote its name have e.g. ``.venv/bin/margin-rl-train``)."""
+    if not command:
+        return None
+    program, *argv = (str(part) for part in command)
+    return " ".join([Path(program).name, *argv])
+
+
 def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path, Path, dict[str, Any]]:
     """(TorchScript file, config.json, training facts) of one compare run, or of a policy reused from a bundle
     (:func:`bundled_policy_entry`); clear error when unfinished."""
@@ -291,7 +300,7 @@ def _run_record(run: dict[str, Any], variant: str, weight: float) -> tuple[Path,
         "final_action_std": final_action_std(run_dir),
         "learned_margin": margin_model_identity(run_config),
         # how the run was trained (the command line of its first `train` call; a warm start names its source model)
-        "training_command": " ".join(str(part) for part in run_config.get("command", [])) or None,
+        "training_command": _command_text(run_config.get("command", [])),
         "init_from": run_config.get("init_from"),
         "metrics": run["metrics"],
     }

@@ -633,7 +633,8 @@ def main(argv: list[str] | None = None) -> int:
             check_same_margin(spec, run_dir)
     except (ValueError, TypeError, FileNotFoundError) as exc:
         parser.error(str(exc))
-    command = list(sys.argv if argv is None else ["margin-rl-train", *argv])
+    # recorded as a user types it, whatever path or module launched it (the bundle cards quote it)
+    command = ["margin-rl-train", *(sys.argv[1:] if argv is None else argv)]
     stop = StopRequest()
     try:
         result = train(

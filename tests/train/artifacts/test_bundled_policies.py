@@ -12,12 +12,12 @@ from margin_rl.train.artifacts.bundle import bundled_names, load_bundle
 from margin_rl.train.artifacts.policies import load_policy
 from margin_rl.train.commands.evaluate import evaluate
 
-SHIPPED = {  # the ids the bundles stored
+# The ids the bundles stored: the robust recipe's margin policies (weight 0.1, trained with the v6 learned margin)
+# beside the baselines of the bundles before them (their training never read a network)
+SHIPPED = {
     "anymal_b": "margin_rl/AnymalB-v1",
     "anymal_c": "margin_rl/AnymalC-v1",
 }
-# the robust recipe's weight-0.1 margin policies, trained with the v6 learned margin; baselines reused from the bundles
-# before (their training never read a network)
 V0_RUN = Path(__file__).resolve().parents[2] / "fixtures" / "v0_run" / "config.json"
 """The config.json of a run stored under a retired -v0 id (the first comparison's, margin seed 0): runs and bundles
 of that time must still resume and evaluate."""

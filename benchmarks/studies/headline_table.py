@@ -164,10 +164,9 @@ def _mismatch_text(report: dict[str, Any], command: float) -> str:
     kept = sum(with_margin <= without + FALLS_TOLERANCE + 1e-12 for without, with_margin in falls)
     changes = sorted(c["statistics"]["lin_acc_rms"]["relative"] for c in cells)
     significant = sum((c["statistics"]["lin_acc_rms"]["p_value"] or 1.0) < 0.05 for c in cells)
-    return (
-        f"falls within +1 pt in {kept} / {len(cells)}; lin. acc. {_signed_percent(changes[-1])} to "
-        f"{_signed_percent(changes[0])} (p < 0.05 in {significant} / {len(cells)})"
-    )
+    low, high = _signed_percent(changes[-1]), _signed_percent(changes[0])
+    span = low if low == high else f"{low} to {high}"
+    return f"falls within +1 pt in {kept} / {len(cells)}; lin. acc. {span} (p < 0.05 in {significant} / {len(cells)})"
 
 
 def robot_table(report: dict[str, Any], push: dict[str, Any], pushes: list[tuple[str, float]]) -> list[str]:
@@ -178,8 +177,9 @@ def robot_table(report: dict[str, Any], push: dict[str, Any], pushes: list[tuple
     cells = nominal_cells(report)
     commands = [c["forward_velocity"] for c in cells]
     episodes = int(report["settings"]["eval_episodes"])
+    seeds = report["seeds"][VARIANTS[1]]
     lines = [
-        "| " + " | ".join(["with the margin, five seeds per variant", *(f"{v:g} m/s" for v in commands)]) + " |",
+        "| " + " | ".join([f"without → with margin, {seeds} seeds each", *(f"{v:g} m/s" for v in commands)]) + " |",
         "|---|" + "---|" * len(commands),
         "| falls (episodes) | " + " | ".join(falls_text(c, report["seeds"], episodes) for c in cells) + " |",
     ]

@@ -372,3 +372,26 @@ def test_headline_push_rows_test_each_impulse_over_seeds() -> None:
         a, b = [s[index] for s in without], [s[index] for s in with_margin]
         p_value = stats.ttest_ind(b, a, equal_var=False).pvalue
         assert cell.startswith(f"{np.mean(a):.2f} → {np.mean(b):.2f} (") and f"{p_value:.2g}" in cell
+
+
+def test_headline_robot_table_is_the_flat_rows_pushes_and_mismatch_by_command() -> None:
+    """--per-robot: a column per command; the falls and flat-ground cells are the flat rows' own (one layout of the
+    same numbers), the push rows the per-impulse tests, the mismatch row the off-nominal cells counted per command."""
+    module = _study("headline_table")
+
+    def cells(row: str) -> list[str]:
+        return [cell.strip() for cell in row.strip().strip("|").split("|")]
+
+    report = module.as_report(json.loads((ROOT / "train" / "bundled" / "anymal_c" / "card.json").read_text()))
+    push = json.loads((ROOT / "docs" / "comparison" / "release" / "push_anymal_c.json").read_text())
+    header, _, falls, *rows = module.robot_table(report, push, [("lateral", 45.0), ("longitudinal", 75.0)])
+    assert cells(header)[1:] == ["0.5 m/s", "0.75 m/s", "1 m/s"]
+    flat = [cells(row) for row in module.flat_rows("C", report)]  # robot, command, seeds, falls, three metrics
+    assert cells(falls)[1:] == [row[3] for row in flat]
+    for metric_row, column in zip(rows[:3], (4, 5, 6)):  # velocity error, linear and angular acceleration
+        assert cells(metric_row)[1:] == [row[column] for row in flat]
+    assert cells(rows[4])[2] == cells(module.push_rows("C", push, 0.75, [45.0])[1])[2]  # lateral 45 N s, 0.75 m/s
+    conditions = sorted({c["condition"] for c in report["grid"]} - {"nominal"})
+    mismatch = cells(rows[-1])
+    assert mismatch[0] == f"model mismatch ({', '.join(conditions)})"
+    assert all(cell.startswith("falls within +1 pt in ") and "/ 3)" in cell for cell in mismatch[1:])

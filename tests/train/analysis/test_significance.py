@@ -388,7 +388,7 @@ def test_headline_robot_table_is_the_flat_rows_pushes_and_mismatch_by_command() 
     assert cells(header)[1:] == ["0.5 m/s", "0.75 m/s", "1 m/s"]
     flat = [cells(row) for row in module.flat_rows("C", report)]  # robot, command, seeds, falls, three metrics
     assert cells(falls)[1:] == [row[3] for row in flat]
-    for metric_row, column in zip(rows[:3], (4, 5, 6)):  # velocity error, linear and angular acceleration
+    for metric_row, column in zip(rows[:3], (4, 5, 6), strict=True):  # velocity error, linear and angular acceleration
         assert cells(metric_row)[1:] == [row[column] for row in flat]
     assert cells(rows[4])[2] == cells(module.push_rows("C", push, 0.75, [45.0])[1])[2]  # lateral 45 N s, 0.75 m/s
     conditions = sorted({c["condition"] for c in report["grid"]} - {"nominal"})

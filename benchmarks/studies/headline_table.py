@@ -83,11 +83,7 @@ def flat_rows(robot: str, report: dict[str, Any]) -> list[str]:
         row = f"| {robot} | {cell['forward_velocity']:g} | {seeds} | {falls_text(cell, report['seeds'], episodes)} |"
         for metric, fmt, relative in FLAT_METRICS:
             a, b = (cell["variants"][name]["mean"][metric] for name in VARIANTS)
-            stats = cell["statistics"][metric]
-            change = ""
-            if relative and stats.get("relative") is not None:
-                change = f"{'−' if stats['relative'] < 0 else '+'}{abs(stats['relative']):.0%}, ".replace("%", " %")
-            row += f" {a:{fmt}} → {b:{fmt}} ({change}{_p_text(stats['p_value'])}) |"
+            row += f" {_change_text(a, b, fmt, cell['statistics'][metric], relative)} |"
         rows.append(row)
     return rows
 
@@ -95,22 +91,8 @@ def flat_rows(robot: str, report: dict[str, Any]) -> list[str]:
 def push_rows(robot: str, report: dict[str, Any], command: float, impulses: list[float]) -> list[str]:
     rows = []
     for direction in report["protocol"]["directions"]:
-        row = f"| {robot} | {direction} |"
-        for impulse in impulses:
-            per_seed = []
-            for name in VARIANTS:
-                values = []
-                for policy in report["variants"][name]["policies"]:
-                    curve = next(
-                        c
-                        for c in policy["curves"]
-                        if c["direction"] == direction and abs(c["forward_velocity"] - command) < 1e-9
-                    )
-                    values.append(curve["survival"][curve["impulses"].index(impulse)])
-                per_seed.append(values)
-            test = compare_seeds(f"survival at {impulse:g} N s", per_seed[0], per_seed[1], names=VARIANTS)
-            row += f" {test.mean_a:.2f} → {test.mean_b:.2f} ({_p_text(test.p_value)}) |"
-        rows.append(row)
+        cells = [_push_survival(report, direction, command, impulse) for impulse in impulses]
+        rows.append(f"| {robot} | {direction} | " + " | ".join(cells) + " |")
     return rows
 
 

@@ -108,9 +108,7 @@ FALLS_TOLERANCE = 0.01
 
 
 def _change_text(a: float, b: float, fmt: str, stats: dict[str, Any], relative: bool) -> str:
-    change = ""
-    if relative and stats.get("relative") is not None:
-        change = f"{'−' if stats['relative'] < 0 else '+'}{abs(stats['relative']):.0%}, ".replace("%", " %")
+    change = f"{_signed_percent(stats['relative'])}, " if relative and stats.get("relative") is not None else ""
     return f"{a:{fmt}} → {b:{fmt}} ({change}{_p_text(stats['p_value'])})"
 
 

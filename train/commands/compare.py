@@ -6,8 +6,9 @@ Example::
         --total-steps 5000000 --margin-weight 0.2 --env-option reward_params.alive_bonus=0.1 \\
         --out runs/compare_b
 
-For the ANYmal ids, ``--margin-weight`` defaults to 0.2 and ``--env-option reward_params.alive_bonus`` to 0.1 for
-both variants: the shipped experiment (see :mod:`margin_rl.train.commands.options`).
+For the ANYmal ids, ``--margin-weight`` defaults to the recipe's (0.1 for ``robust``) and ``--env-option
+reward_params.alive_bonus`` to 0.1 for both variants: the shipped experiment (see
+:mod:`margin_rl.train.commands.options`).
 
 Both variants train with a training recipe of :mod:`margin_rl.train.recipes` (its environment options,
 environments, steps, PPO options and margin weight; options given here replace the recipe's): the shipped bundles'
@@ -478,16 +479,14 @@ def variants_of_runs(runs: list[Path]) -> tuple[str, dict[str, tuple[float, list
     env_ids = set()
     for run in runs:
         config, progress = run / CONFIG_FILE, run / PROGRESS_FILE
-        if bundled_policy_entry(run) is not None:
-            policy = run / POLICY_FILE
-        elif config.is_file() and progress.is_file() and read_json(progress).get("finished"):
-            policy = run / final_model_name(read_json(config)["backend"])
-        else:
+        bundled = bundled_policy_entry(run) is not None
+        if not (bundled or (config.is_file() and progress.is_file() and read_json(progress).get("finished"))):
             raise ValueError(
                 f"--runs {run}: not a finished training run (no config.json, or progress not finished), nor a "
                 "bundled policy folder (<bundle>/<variant>__s<seed>)"
             )
         data = read_json(config)
+        policy = run / (POLICY_FILE if bundled else final_model_name(data["backend"]))
         env_ids.add(data["env_id"])
         weight = float(data["env_config"]["margin_weight"])
         found.setdefault(weight, []).append((int(data["seed"]), policy))

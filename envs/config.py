@@ -10,7 +10,7 @@ given for ``EnvConfig.reward_params`` becomes a :class:`RewardParams` (its keys 
 
 The reward's added weights and parameters live in one mapping, ``EnvConfig.reward_params``
 (:class:`RewardParams`: ``alive_bonus``, ``knee_clearance``, ``knee_clearance_height``, ``base_height``,
-``base_height_fraction``, ``logistic_gain``);
+``base_height_fraction``, ``termination_penalty``, ``logistic_gain``);
 until EnvConfig v1 (the ``-v1`` ids) they were top-level fields. Stored v0 configs are translated in one place,
 :func:`upgrade_stored_env_config` (table :data:`LEGACY_FIELDS`).
 """
@@ -310,6 +310,11 @@ class RewardParams(Mapping):
     # itself. One-sided: a policy may walk taller; the comparison gives both variants the same term.
     base_height: float = 0.0
     base_height_fraction: float = 0.9  # of the standing keyframe's base height above the floor
+    # Penalty on the step an episode ends in a fall (term "termination", 0: off), added to any preset, as the field's
+    # rough-terrain tasks have it (legged_gym's "termination"). The alive bonus pays for every step survived; this
+    # also makes the fall itself cost, which matters where falls come early (a policy walking onto a step it cannot
+    # climb). The comparison gives both variants the same term.
+    termination_penalty: float = 0.0
     logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
 
     def __post_init__(self) -> None:
@@ -331,6 +336,9 @@ class RewardParams(Mapping):
             maximum=1.5,
             min_open=True,
             hint="of the standing keyframe's base height",
+        )
+        check_number(
+            f"{where}.termination_penalty", self.termination_penalty, minimum=0.0, hint="penalty per fall, 0: off"
         )
         # L is even (L(x) = L(-x)), so only the gain's size matters; 0 would make the velocity term constant.
         check_number(f"{where}.logistic_gain", self.logistic_gain, minimum=0.0, min_open=True, hint="[s/m]")
@@ -484,6 +492,8 @@ class EnvConfig:
             weights["knee_clearance"] = weights.get("knee_clearance", 0.0) - params.knee_clearance
         if params.base_height:
             weights["base_height"] = weights.get("base_height", 0.0) - params.base_height
+        if params.termination_penalty:
+            weights["termination"] = weights.get("termination", 0.0) - params.termination_penalty
         return weights
 
 

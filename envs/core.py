@@ -432,10 +432,11 @@ class AnymalCore:
             values["base_height_target"] = self._full(
                 cfg.reward_params.base_height_fraction * self.robot.standing_height
             )
-        reward, terms = compute_rewards(weights, values, cfg.reward_params.logistic_gain)
-        self.last_action = self.xp.asarray(action, copy=True)
         causes = self._terminations(state, base_height, diverged)
         terminated = any_cause(causes)
+        values["fell"] = terminated & ~diverged  # a diverged simulation is the simulator's failure, not the policy's
+        reward, terms = compute_rewards(weights, values, cfg.reward_params.logistic_gain)
+        self.last_action = self.xp.asarray(action, copy=True)
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
         info = self._info(state, acc, values, terms, margin, stability, terminated, diverged, causes)
         observation = self._observe(values)

@@ -110,6 +110,13 @@ def base_height(s: Arrays, gain: float) -> Any:
     return namespace(below).clip(below, min=0.0)
 
 
+def termination(s: Arrays, gain: float) -> Any:
+    """1 on the step an episode ends in a fall (any termination cause but a diverged simulation), else 0
+    (RewardParams.termination_penalty)."""
+    xp = namespace(s["fell"])
+    return xp.astype(s["fell"], xp.float64)
+
+
 REWARD_TERMS: dict[str, Callable[[Arrays, float], Any]] = {
     f.__name__: f
     for f in (
@@ -128,6 +135,7 @@ REWARD_TERMS: dict[str, Callable[[Arrays, float], Any]] = {
         collisions,
         knee_clearance,
         base_height,
+        termination,
     )
 }
 

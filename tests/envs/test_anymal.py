@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 
 import margin_rl
 from margin_rl.envs import ANYMAL_ENV_IDS, EPISODE_STEPS
-from margin_rl.envs.config import EnvConfig, RandomizationConfig
+from margin_rl.envs.config import EnvConfig, RandomizationConfig, TerminationConfig
 from margin_rl.envs.core import AnymalCore, heading_rotation, lambda_from_simulation
 from margin_rl.envs.observations import POLICY_OBSERVATIONS, observation_size
 from margin_rl.robot import quat_wxyz_to_matrix
@@ -428,9 +428,36 @@ def test_base_height_term_matches_the_base_body_in_mujoco(toy_weights: str) -> N
         np.testing.assert_allclose(out.info["reward_base_height"][env], expected, rtol=0, atol=1e-9)
 
 
+def test_termination_penalty_costs_exactly_the_falls() -> None:
+    """Two cores stepped with the same actions from the same seed, one with the penalty: their rewards differ by
+    -penalty on the steps whose info says ``fell`` (the terminated steps here: a base-height bound just below the
+    standing base ends episodes early, with autoreset) and nowhere else; the term is off by default."""
+    options = dict(
+        robot="anymal_b", margin="none", randomization=NO_NOISE, termination=TerminationConfig(min_base_height=0.505)
+    )
+    off = AnymalCore(EnvConfig(**options), 3, seed=0)
+    on = AnymalCore(EnvConfig(**options, reward_params={"termination_penalty": 10.0}), 3, seed=0)
+    off.reset(), on.reset()
+    rng = np.random.default_rng(0)
+    falls = 0
+    for _ in range(12):
+        actions = rng.uniform(-1, 1, (3, 12)) * np.array([[0.0], [1.0], [3.0]])
+        a, b = off.step(actions), on.step(actions)
+        assert "reward_termination" not in a.info
+        np.testing.assert_array_equal(a.terminated, b.terminated)
+        fell = b.info["fell"].astype(bool)
+        np.testing.assert_array_equal(fell, b.terminated)  # no diverged simulation here
+        np.testing.assert_allclose(b.info["reward_termination"], -10.0 * fell, rtol=0, atol=0)
+        np.testing.assert_allclose(b.reward - a.reward, -10.0 * fell, rtol=0, atol=1e-12)
+        falls += int(fell.sum())
+    assert falls > 0  # the bound does end episodes, so the comparison above saw the term at work
+
+
 @pytest.mark.parametrize(
     ("field", "value"),
     [
+        ("termination_penalty", -1.0),
+        ("termination_penalty", np.inf),
         ("knee_clearance", -1.0),
         ("knee_clearance_height", -0.1),
         ("knee_clearance", np.nan),
@@ -439,7 +466,7 @@ def test_base_height_term_matches_the_base_body_in_mujoco(toy_weights: str) -> N
         ("base_height_fraction", 2.0),
     ],
 )
-def test_knee_clearance_and_base_height_reject_bad_values(field: str, value: float) -> None:
+def test_reward_params_reject_bad_values(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=field):
         EnvConfig(reward_params={field: value})
 

@@ -40,6 +40,7 @@ def reward_inputs(rng: np.random.Generator, n: int = N) -> dict[str, np.ndarray]
         "knee_clearance_height": np.full(n, 0.1),
         "base_height": rng.uniform(0.2, 0.6, n),
         "base_height_target": np.full(n, 0.45),
+        "fell": rng.random(n) < 0.1,
     }
 
 

@@ -114,7 +114,8 @@ def test_bad_margin_weight_is_refused_at_make(value: object, error: type, messag
             lambda: EnvConfig(reward_params={"alive_bonsu": 0.1}),
             TypeError,
             r"EnvConfig.reward_params: unknown key\(s\) \['alive_bonsu'\]; the known keys are alive_bonus, "
-            r"knee_clearance, knee_clearance_height, base_height, base_height_fraction, logistic_gain",
+            r"knee_clearance, knee_clearance_height, base_height, base_height_fraction, termination_penalty, "
+            r"logistic_gain",
         ),
         (
             lambda: EnvConfig(reward_params=0.1),
@@ -293,6 +294,7 @@ NUMERIC_FIELDS: dict[type, list[str]] = {
         "knee_clearance_height",
         "base_height",
         "base_height_fraction",
+        "termination_penalty",
         "logistic_gain",
     ],
     TerminationConfig: ["min_base_height", "max_tilt_rad"],
@@ -300,7 +302,7 @@ NUMERIC_FIELDS: dict[type, list[str]] = {
 }
 NUMBER_FIELDS = {
     "decimation", "action_scale", "episode_length_s", "margin_weight", "alive_bonus", "knee_clearance",
-    "knee_clearance_height", "base_height", "base_height_fraction", "logistic_gain",
+    "knee_clearance_height", "base_height", "base_height_fraction", "termination_penalty", "logistic_gain",
     "acceleration_filter", "push_force", "push_duration_s", "observation_noise", "reset_joint_noise",
     "reset_velocity_noise", "min_base_height", "max_tilt_rad", "size", "resolution", "tile", "max_slope_deg",
     "pad", "base_level", "max_height",

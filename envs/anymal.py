@@ -38,7 +38,8 @@ usual locomotion regularisers (torques, action rate, orientation, feet air time,
 * ``info``: every weighted reward term as ``reward_<term>`` (their sum is the reward), ``margin``,
   ``base_lin_acc`` and ``base_ang_acc`` (base frame; finite differences over the policy step),
   ``base_lin_vel``, ``velocity_error``, ``contacts``, ``stance_width``, ``base_height`` (base origin above the
-  terrain under it [m]), ``fell`` (terminated, not diverged),
+  terrain under it [m]), ``touchdowns`` and ``edge_touchdowns`` (feet landing this step, and of them those landing
+  on a step edge: :data:`margin_rl.envs.terrain.STEP_EDGE_RISE`), ``fell`` (terminated, not diverged),
   ``diverged``, ``termination_<cause>`` for each cause (1.0 where it holds this step, several may), and
   ``lambda``: the (47,) stability state the margin was evaluated on (seed 000 eq. 4; layout
   :data:`margin_rl.stability.LAMBDA_FIELDS`, one name per entry from :func:`margin_rl.stability.lambda_names`,

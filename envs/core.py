@@ -69,7 +69,7 @@ from margin_rl.envs.stability_input import (
 )
 from margin_rl.envs.step_data import Accelerations, SimulationState, StepOutput, check_finite_outputs
 from margin_rl.envs.terminations import any_cause, info_key, termination_causes
-from margin_rl.envs.terrain import Terrain, flat_terrain, next_levels, rough_terrain
+from margin_rl.envs.terrain import STEP_EDGE_RISE, Terrain, flat_terrain, next_levels, rough_terrain
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
 from margin_rl.robot import mjcf_names as names
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, StabilityState
@@ -411,6 +411,7 @@ class AnymalCore:
         acc = self._estimate_accelerations(state)
         stability, margin = self._stability(state, acc)
         touchdown, air_at_touchdown = self._track_air_time(state.contacts)
+        edge_touchdown = self._edge_touchdowns(state.feet, touchdown)
         base_height = state.base_pos[:, 2] - self.terrain.height(state.base_pos[:, :2])
         values = {
             **self._policy_values(state, slice(None)),
@@ -420,6 +421,7 @@ class AnymalCore:
             "last_action": self.last_action,
             "joint_acc": acc.joints,
             "touchdown": touchdown,
+            "edge_touchdown": edge_touchdown,
             "air_time_at_touchdown": air_at_touchdown,
             "thigh_contacts": state.thigh_contacts,
             "base_height": base_height,
@@ -554,6 +556,14 @@ class AnymalCore:
         self._prev_contacts = xp.asarray(contacts, copy=True)
         return touchdown, air_at_touchdown
 
+    def _edge_touchdowns(self, feet: Any, touchdown: Any) -> Any:
+        """(N, 4) touchdowns on a step edge (:data:`~margin_rl.envs.terrain.STEP_EDGE_RISE`); none on flat ground,
+        where no terrain is looked up."""
+        if self.terrain.is_flat:
+            return self.xp.zeros_like(touchdown)
+        rough_under_sole = self.terrain.height_spread(feet[..., :2], self.robot.foot_radius) > STEP_EDGE_RISE
+        return touchdown & rough_under_sole
+
     def _terminations(
         self, state: SimulationState, base_height: np.ndarray, diverged: np.ndarray
     ) -> dict[str, np.ndarray]:
@@ -596,6 +606,8 @@ class AnymalCore:
             "velocity_error": xp.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
             "contacts": flag(state.contacts),
             "stance_width": stance_width(stability.feet),  # feet in H, as they entered lambda
+            "touchdowns": xp.sum(flag(values["touchdown"]), axis=1),  # feet landing this step
+            "edge_touchdowns": xp.sum(flag(values["edge_touchdown"]), axis=1),  # of them, on a step edge
             "base_height": values["base_height"],  # base origin above the terrain under it [m]
             "lambda": self._last_lambda,  # (N, 47), the margin's input (names: stability.lambda_names())
             "fell": flag(terminated & ~diverged),

@@ -162,6 +162,24 @@ class Terrain:
         n = xp.stack([-dx, -dy, xp.ones_like(dx)], axis=-1)
         return n / xp.linalg.vector_norm(n, axis=-1, keepdims=True)
 
+    def height_spread(self, xy: Any, radius: float, points: int = 8) -> Any:
+        """How uneven the ground is under discs of ``radius`` [m] centred on points (..., 2): the highest minus the
+        lowest ground height [m] over each centre and ``points`` points on its rim (0 on flat ground)."""
+        xp = namespace(xy)
+        xy = xp.astype(xp.asarray(xy), xp.float64, copy=False)
+        if self.heights is None:
+            return xp.zeros(xy.shape[:-1], dtype=xp.float64, device=device_of(xy))
+        angles = 2 * math.pi * np.arange(points) / points
+        ring = np.concatenate([np.zeros((1, 2)), radius * np.column_stack([np.cos(angles), np.sin(angles)])])
+        samples = self.height(xy[..., None, :] + like(ring, xy))  # (..., points + 1)
+        return xp.max(samples, axis=-1) - xp.min(samples, axis=-1)
+
+
+STEP_EDGE_RISE = 0.02
+"""[m] A foot lands on a step edge when the ground under its sole, a disc of the foot sphere's radius, rises by more
+than this (:meth:`Terrain.height_spread`). Inclines stay below it (15 degrees across ANYmal's 6 cm soles: 1.6 cm), the
+Fig. 8 tiles' risers exceed it from difficulty 1/3 (steps of 6 cm and more at full scale)."""
+
 
 CURRICULUM_TERRAIN = TerrainConfig(size=32.0, curriculum_levels=9)
 """The terrain curriculum the rough recipe trains on: 9 rows of 8 tiles (each of the 8 tile types once per row),

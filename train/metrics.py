@@ -17,6 +17,8 @@ every episode that ends. Metric names and units:
 ``forward_velocity_mean``        mean heading velocity ẋ in the base frame [m/s]
 ``stance_width_mean``            mean lateral foot spread in the heading frame [m]
 ``base_height_mean``             mean height of the base origin above the terrain under it [m]
+``edge_landing_fraction``        share of the episode's foot touchdowns on a step edge (``info["edge_touchdowns"]``
+                                 over ``info["touchdowns"]``; 0 on flat ground, NaN without a touchdown)
 ``fell``, ``diverged``           1 if the episode ended in a fall / a diverged simulation, else 0
 ``termination/<cause>``          1 if the cause held on the episode's last step (``info["termination_<cause>"]``;
                                  the causes of :mod:`margin_rl.envs.terminations`, several may hold at once)
@@ -97,6 +99,8 @@ class EpisodeStatistics:
         self._fwd_vel = self._zeros(n)
         self._stance = self._zeros(n)
         self._base_height = self._zeros(n)
+        self._touchdowns = self._zeros(n)
+        self._edge_touchdowns = self._zeros(n)
 
     def _zeros(self, *shape: int, dtype: Any = None) -> Any:
         xp = self._xp
@@ -124,6 +128,8 @@ class EpisodeStatistics:
             self._fwd_vel,
             self._stance,
             self._base_height,
+            self._touchdowns,
+            self._edge_touchdowns,
         ):
             array[ids] = 0
         self._margin_min[ids] = math.inf
@@ -160,6 +166,8 @@ class EpisodeStatistics:
         self._fwd_vel += xp.asarray(info["base_lin_vel"])[:, 0]
         self._stance += info["stance_width"]
         self._base_height += info["base_height"]
+        self._touchdowns += info["touchdowns"]
+        self._edge_touchdowns += info["edge_touchdowns"]
         truncated = xp.astype(xp.asarray(truncated), xp.bool, copy=False)
         done = xp.astype(xp.asarray(terminated), xp.bool, copy=False) | truncated
         if not bool(xp.any(done)):
@@ -208,6 +216,8 @@ class EpisodeStatistics:
         metrics["forward_velocity_mean"] = self._fwd_vel[ids] / length
         metrics["stance_width_mean"] = self._stance[ids] / length
         metrics["base_height_mean"] = self._base_height[ids] / length
+        with np.errstate(invalid="ignore", divide="ignore"):
+            metrics["edge_landing_fraction"] = self._edge_touchdowns[ids] / self._touchdowns[ids]
         metrics["fell"] = f(info["fell"])[ids]
         metrics["diverged"] = f(info["diverged"])[ids]
         for cause in CAUSE_NAMES:

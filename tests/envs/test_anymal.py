@@ -15,6 +15,7 @@ from margin_rl.envs import ANYMAL_ENV_IDS, EPISODE_STEPS
 from margin_rl.envs.config import EnvConfig, RandomizationConfig, TerminationConfig
 from margin_rl.envs.core import AnymalCore, heading_rotation, lambda_from_simulation
 from margin_rl.envs.observations import POLICY_OBSERVATIONS, observation_size
+from margin_rl.envs.terrain import STEP_EDGE_RISE
 from margin_rl.robot import quat_wxyz_to_matrix
 from margin_rl.robot.mjcf_names import BASE_QUATERNION_QPOS, JOINT_QVEL
 from margin_rl.stability.analytic.lambda_state import from_lambda
@@ -241,6 +242,47 @@ def test_rough_terrain_heights_match_mujoco_collision_geometry() -> None:
         assert 3.0 - dist == pytest.approx(core.terrain.height(np.array([x, y])), abs=2e-3)
     heights = core.terrain.heights
     assert np.ptp(heights) >= 0.06 and np.isfinite(heights).all()
+
+
+def test_edge_touchdowns_are_feet_landing_where_the_ground_under_the_sole_rises() -> None:
+    """Robots dropped over the rough tiles and stepped with lively random targets: each step's ``touchdowns`` and
+    ``edge_touchdowns`` equal a recount from MuJoCo's own state (the foot geoms' positions and the foot contact
+    sensors in an independent MjData, the terrain's spread under a sole of the MJCF's foot radius); some landings are
+    on edges, and none is on flat ground."""
+    n = 8
+    core = AnymalCore(EnvConfig(robot="anymal_c", terrain="rough", margin="none", randomization=NO_NOISE), n, 0)
+    core.reset()
+    rng = np.random.default_rng(1)
+    inner = (core.terrain.heights.shape[1] - 1) * core.terrain.resolution / 2 - 16.0
+    xy = rng.uniform(-inner, inner, (n, 2))
+    core.physics.qpos[:, 0:2] = xy
+    core.physics.qpos[:, 2] = core.terrain.height(xy) + 0.6
+    core.physics.forward()
+    feet = [mujoco.mj_name2id(core.model, mujoco.mjtObj.mjOBJ_GEOM, f"{leg}_foot") for leg in ("LF", "RF", "LH", "RH")]
+    sensors = [core.model.sensor(f"{leg}_foot_contact") for leg in ("LF", "RF", "LH", "RH")]
+    radius = core.model.geom_size[feet[0], 0]
+    core.step(np.zeros((n, 12)))  # the core's contacts of the step before, as the recount's
+    before = np.array([[core.render_data(env).sensordata[s.adr[0]] > 0 for s in sensors] for env in range(n)])
+    edges = 0
+    for _ in range(40):
+        out = core.step(rng.uniform(-1, 1, (n, 12)))
+        for env in range(n):
+            data = core.render_data(env)
+            touching = np.array([data.sensordata[s.adr[0]] > 0 for s in sensors])
+            landing = touching & ~before[env]
+            spread = core.terrain.height_spread(data.geom_xpos[feet, :2], radius)
+            assert out.info["touchdowns"][env] == landing.sum()
+            assert out.info["edge_touchdowns"][env] == (landing & (spread > STEP_EDGE_RISE)).sum()
+            before[env] = touching
+        edges += int(out.info["edge_touchdowns"].sum())
+        if out.terminated.any() or out.truncated.any():
+            break
+    assert edges > 0
+    flat = AnymalCore(EnvConfig(robot="anymal_c", margin="none"), 2, 0)
+    flat.reset()
+    for _ in range(20):
+        out = flat.step(rng.uniform(-1, 1, (2, 12)))
+        assert not out.info["edge_touchdowns"].any()
 
 
 def test_unknown_option_is_named() -> None:

@@ -122,3 +122,44 @@ def test_heights_are_the_surface_mujoco_collides_with() -> None:
     np.testing.assert_allclose(incline.height(inside), 1.0 + slope * inside[:, 0], atol=1e-12)
     np.testing.assert_allclose(incline.normal(inside), np.tile([-slope, 0.0, 1.0] / np.hypot(slope, 1.0), (50, 1)),
                                atol=1e-12)  # fmt: skip
+
+
+def _ramp_terrain(rise_per_cell: np.ndarray) -> Terrain:
+    """A terrain varying along x only: heights[:, c] = rise_per_cell[:c].sum(), 5 cm cells, origin (0, 0)."""
+    profile = np.concatenate([[0.0], np.cumsum(rise_per_cell)])
+    heights = np.tile(profile, (5, 1))
+    return Terrain(heights=heights, origin=(0.0, 0.0), resolution=0.05, spawn_points=np.zeros((1, 3)))
+
+
+@settings(max_examples=30, deadline=None)
+@given(slope=st.floats(0.0, 0.5), radius=st.floats(0.005, 0.04), x=st.floats(0.05, 0.3), y=st.floats(0.05, 0.15))
+def test_height_spread_on_an_incline_is_the_rise_across_the_disc(
+    slope: float, radius: float, x: float, y: float
+) -> None:
+    """On a plane rising along x by ``slope``, the highest and lowest points of a disc's rim lie on the x axis
+    through its centre (two of the 8 rim points): spread = 2 r slope, by hand."""
+    terrain = _ramp_terrain(np.full(8, 0.05 * slope))
+    spread = terrain.height_spread(np.array([[x, y]]), radius)
+    np.testing.assert_allclose(spread, [2 * radius * slope], rtol=0, atol=1e-12)
+
+
+def test_height_spread_sees_a_step_only_under_the_sole() -> None:
+    """A 6 cm step as the heightfield makes it (a one-cell riser from x = 0.20 to 0.25 m): a 3 cm sole centred on
+    the riser spans it (spread 6 cm); one centred 5 cm from it touches nothing of it (0); flat ground is 0."""
+    rise = np.zeros(10)
+    rise[4] = 0.06
+    terrain = _ramp_terrain(rise)
+    spread = terrain.height_spread(np.array([[0.225, 0.1], [0.10, 0.1], [0.35, 0.1]]), 0.03)
+    np.testing.assert_allclose(spread, [0.06, 0.0, 0.0], atol=1e-12)
+    flat = Terrain(heights=None, origin=(0.0, 0.0), resolution=1.0, spawn_points=np.zeros((1, 3)))
+    assert flat.height_spread(np.zeros((3, 4, 2)), 0.03).shape == (3, 4)
+
+
+def test_height_spread_is_the_same_on_torch() -> None:
+    import torch
+
+    terrain = rough_terrain(TerrainConfig(size=8.0, border=1.0), seed=3)
+    xy = np.random.default_rng(0).uniform(-4.0, 4.0, (64, 4, 2))
+    on_torch = terrain.height_spread(torch.from_numpy(xy), 0.03)
+    assert isinstance(on_torch, torch.Tensor)
+    np.testing.assert_allclose(on_torch.numpy(), terrain.height_spread(xy, 0.03), rtol=0, atol=1e-12)

@@ -24,6 +24,8 @@ def step_info(rng: np.random.Generator) -> dict[str, np.ndarray]:
         "velocity_error": rng.uniform(0, 0.5, N),
         "stance_width": rng.uniform(0.3, 0.5, N),
         "base_height": rng.uniform(0.4, 0.6, N),
+        "touchdowns": rng.integers(0, 3, N).astype(float),
+        "edge_touchdowns": rng.integers(0, 2, N).astype(float),
         "fell": (rng.random(N) < 0.1).astype(float),
         "diverged": np.zeros(N),
         "termination_base_contact": (rng.random(N) < 0.1).astype(float),

@@ -212,6 +212,7 @@ PRINTED_METRICS: tuple[str, ...] = (
     "ang_acc_rms",
     "stance_width_mean",
     "base_height_mean",
+    "edge_landing_fraction",
     "margin_mean",
     "fell",
 )

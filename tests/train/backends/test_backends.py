@@ -106,6 +106,8 @@ def test_episode_statistics_rms_peak_and_warmup() -> None:
             "velocity_error": np.array([0.25]),
             "stance_width": np.array([0.4]),
             "base_height": np.array([0.40 + 0.03 * k]),
+            "touchdowns": np.array([float(k + 1)]),  # 6 touchdowns in the episode
+            "edge_touchdowns": np.array([float(k == 1)]),  # one of them on an edge
             "fell": np.array([float(k == 2)]),
             "diverged": np.array([0.0]),
         }
@@ -117,6 +119,7 @@ def test_episode_statistics_rms_peak_and_warmup() -> None:
     assert out["margin_mean"][0] == pytest.approx(0.0) and out["margin_min"][0] == pytest.approx(-0.1)
     assert out["margin_negative_fraction"][0] == pytest.approx(1 / 3)
     assert out["base_height_mean"][0] == pytest.approx(0.43)  # every step, warm-up included
+    assert out["edge_landing_fraction"][0] == pytest.approx(1 / 6)
     assert out["fell"][0] == 1.0 and out["timed_out"][0] == 0.0 and out["duration_s"][0] == pytest.approx(0.06)
     tags = tensorboard_tags(out)
     assert "Episode_Reward/velocity_tracking" in tags and "Episode_Termination/fell" in tags and "env" not in tags

@@ -440,7 +440,7 @@ class AnymalCore:
         reward, terms = compute_rewards(weights, values, cfg.reward_params.logistic_gain)
         self.last_action = self.xp.asarray(action, copy=True)
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
-        info = self._info(state, acc, values, terms, margin, stability, terminated, diverged, causes)
+        info = self._info(state, acc, values, terms, margin, stability, diverged, causes)
         observation = self._observe(values)
         final_observation = self.xp.asarray(observation, copy=True)
         done = terminated | truncated
@@ -586,7 +586,6 @@ class AnymalCore:
         terms: dict[str, np.ndarray],
         margin: np.ndarray,
         stability: StabilityState,
-        terminated: np.ndarray,
         diverged: np.ndarray,
         causes: dict[str, np.ndarray],
     ) -> dict[str, np.ndarray]:
@@ -610,7 +609,7 @@ class AnymalCore:
             "edge_touchdowns": xp.sum(flag(values["edge_touchdown"]), axis=1),  # of them, on a step edge
             "base_height": values["base_height"],  # base origin above the terrain under it [m]
             "lambda": self._last_lambda,  # (N, 47), the margin's input (names: stability.lambda_names())
-            "fell": flag(terminated & ~diverged),
+            "fell": flag(values["fell"]),
             "diverged": flag(diverged),
             **{info_key(name): flag(flags) for name, flags in causes.items()},
             # the curriculum row of the episode (the level it moves to is set at its reset)

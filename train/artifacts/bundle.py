@@ -24,6 +24,7 @@ with these weights. (``evaluate`` on one bundled ``policy.pt`` uses the package'
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import tempfile
@@ -70,8 +71,13 @@ class Bundle:
     margin_weights: Path | None = None  # the learned-margin .npz the policies were trained with (format >= 2)
 
     def env_overrides(self) -> dict[str, Any]:
-        """EnvConfig overrides that evaluate the policies with the margin they were trained with."""
-        return {} if self.margin_weights is None else {"margin_weights": str(self.margin_weights)}
+        """EnvConfig overrides that evaluate the policies as the card's figures were measured: in the card's
+        evaluation environment (``eval_env_overrides``, e.g. a rough terrain at a fixed difficulty; none for flat
+        bundles) and with the margin they were trained with (the bundle's own weights, whatever the card names)."""
+        overrides = {k: v for k, v in self.card.get("eval_env_overrides", {}).items() if k != "margin_weights"}
+        if self.margin_weights is not None:
+            overrides["margin_weights"] = str(self.margin_weights)
+        return overrides
 
     def variants(self) -> dict[str, tuple[float, list[tuple[int, Path]]]]:
         """Variant name -> (margin weight, [(training seed, policy file), ...])."""
@@ -395,6 +401,9 @@ def write_bundle(report: dict[str, Any], dest: str | Path, provenance: dict[str,
             "name": dest.name,
             "settings": report["settings"],
             "env_options": report.get("env_options", {}),
+            # the evaluation's own environment options (compare --runs ... --terrain-difficulty D): --bundled reuses
+            # them
+            "eval_env_overrides": report.get("eval_env_overrides", {}),
             "provenance": provenance,
             "table": _variant_table(report["variants"]),
             **_measured_differences(report),
@@ -467,6 +476,14 @@ def card_markdown(card: dict[str, Any]) -> str:
         "",
         f"Evaluation: {s['eval_episodes']} deterministic episodes from seed {s['eval_seed']}, command "
         f"{s['forward_velocity']:g} m/s, accelerations after {s['warmup_s']:g} s; mean ± std over training seeds.",
+        *(
+            [
+                "Evaluation environment options (as `--env-option`s; `compare --bundled` applies them): "
+                f"`{json.dumps(o)}`"
+            ]
+            if (o := card.get("eval_env_overrides"))
+            else []
+        ),
         "",
     ]
     lines += summary_table(card["table"])

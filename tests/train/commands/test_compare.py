@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -281,6 +282,36 @@ def test_new_bundle_reuses_a_bundled_baseline_trained_with_another_network(tmp_p
     (baseline / "policy.pt").write_bytes((baseline / "policy.pt").read_bytes() + b"\0")
     with pytest.raises(ValueError, match=r"policy\.pt: checksum mismatch"):
         variants_of_runs([baseline, margin_run])
+
+
+def test_a_bundle_evaluated_on_a_fixed_terrain_is_reevaluated_there(tmp_path: Path, toy_weights: str) -> None:
+    """compare --runs ... --terrain-difficulty D --bundle: the card records the evaluation's environment options and
+    compare --bundled applies them, so it reproduces the card's table (the rough bundles' evaluation in make demo)."""
+    from margin_rl.train.artifacts.bundle import CARD_FILE, load_bundle
+
+    train = [
+        "--backend", "rsl", "--seeds", "1", "--num-envs", "4", "--total-steps", "96", "--eval-episodes", "1",
+        "--warmup-s", "0.1", "--margin-weight", "2", "--env-option", "episode_length_s=0.4", "--no-progress",
+        "--margin-weights", toy_weights, "--out", str(tmp_path / "trained"),
+    ]  # fmt: skip
+    assert main(train) == 0
+    runs = [str(tmp_path / "trained" / "runs" / name) for name in ("mw0__s0", "mw2__s0")]
+    bundle_dir = tmp_path / "rough_bundle"
+    evaluate = ["--eval-episodes", "2", "--warmup-s", "0.1", "--terrain-difficulty", "0.25"]
+    assert main(["--runs", *runs, *evaluate, "--out", str(tmp_path / "first"), "--bundle", str(bundle_dir)]) == 0
+    card = json.loads((bundle_dir / CARD_FILE).read_text())
+    assert card["eval_env_overrides"]["terrain"] == "rough"
+    assert card["eval_env_overrides"]["terrain_config"]["step_height"] == pytest.approx([0.015, 0.045])
+    assert "Evaluation environment options" in (bundle_dir / "CARD.md").read_text()
+    assert load_bundle(bundle_dir).env_overrides()["terrain"] == "rough"
+    assert main(["--bundled", str(bundle_dir), "--out", str(tmp_path / "again")]) == 0
+    again = json.loads((tmp_path / "again" / "compare.json").read_text())
+    assert again["eval_env_overrides"]["terrain"] == "rough"
+    for variant, row in card["table"].items():
+        for metric, value in row["mean"].items():
+            assert again["bundle"]["card_table"][variant]["mean"][metric] == value
+            measured = np.mean([r["metrics"][metric] for r in again["variants"][variant]["runs"]])
+            assert measured == pytest.approx(value, rel=1e-9, abs=1e-12), (variant, metric)
 
 
 def test_unknown_bundle_is_a_clear_error(tmp_path: Path) -> None:

@@ -75,9 +75,9 @@ def stability_fingerprints(n: int) -> dict[str, str]:
     return out
 
 
-NEW_INFO_KEY = re.compile(r"^_?termination_")
-"""Info keys added after the first fingerprints (the ANYmal ids' v1 termination causes): left out of the env
-digests, so that every number the earlier files hold is still compared."""
+NEW_INFO_KEY = re.compile(r"^_?(termination_|(edge_)?touchdowns$)")
+"""Info keys added after the first fingerprints (the ANYmal ids' v1 termination causes, the feet landing and those on
+step edges): left out of the env digests, so that every number the earlier files hold is still compared."""
 
 
 def _digested(info: dict[str, Any]) -> list[str]:

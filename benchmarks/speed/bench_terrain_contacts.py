@@ -39,13 +39,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_terrain_geoms:
 
 import mujoco
 import numpy as np
-from bench_terrain_geoms import drop_points, runner
+from bench_terrain_geoms import rough_workload, runner
 
-from benchmarks.harness import interleave, machine_line, parser, print_table, summarise, write_record
-from margin_rl.envs.config import EnvConfig
+from benchmarks.harness import interleave, machine_line, print_table, summarise, write_record
 from margin_rl.envs.scene import build_model
-from margin_rl.envs.terrain import flat_terrain, rough_terrain
-from margin_rl.robot import load_robot
+from margin_rl.envs.terrain import flat_terrain
 from margin_rl.robot import mjcf_names as names
 from margin_rl.robot.model import LEGS
 
@@ -140,18 +138,10 @@ def touching(model: mujoco.MjModel, states: list[tuple[np.ndarray, np.ndarray]],
 
 
 def main() -> None:
-    args_parser = parser(__doc__)
-    args_parser.add_argument("--robot", default="anymal_c")
-    args_parser.add_argument("--num-envs", type=int, default=128)
-    args_parser.add_argument("--steps", type=int, default=200)
-    args_parser.add_argument("--rounds", type=int, default=3)
-    args = args_parser.parse_args()
-    config = EnvConfig(robot=args.robot, terrain="rough")
-    robot = load_robot(args.robot)
-    terrain = rough_terrain(config.terrain_config, 0)
-    rng = np.random.default_rng(0)
-    places = drop_points(terrain, args.num_envs, rng)
-    actions = rng.uniform(-0.3, 0.3, size=(args.steps, args.num_envs, 12))
+    work = rough_workload(__doc__)
+    args, config, robot, terrain, places, actions, rng = (
+        work.args, work.config, work.robot, work.terrain, work.places, work.actions, work.rng
+    )  # fmt: skip
     full = build_model(robot, terrain, config.terrain_config)
     parts = robot_parts(full)
     sets: dict[str, mujoco.MjModel] = {}

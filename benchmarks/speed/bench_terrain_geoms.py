@@ -28,9 +28,11 @@ Reported: env-steps/s (medians of interleaved rounds, and the ratio to the plane
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks.harness
@@ -43,7 +45,7 @@ from benchmarks.harness import interleave, machine_line, parser, print_table, su
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.scene import build_model
 from margin_rl.envs.terrain import Terrain, flat_terrain, rough_terrain
-from margin_rl.robot import load_robot
+from margin_rl.robot import Robot, load_robot
 from margin_rl.robot import mjcf_names as names
 
 
@@ -158,19 +160,43 @@ def single_world_profile(
     }
 
 
-def main() -> None:
-    args_parser = parser(__doc__)
+@dataclass(frozen=True)
+class RoughWorkload:
+    """What the rough-terrain benchmarks step: the command line's settings, the environments' rough terrain of seed 0
+    for ``args.robot``, random drop places over its tiles and seeded random servo offsets (``rng`` continues the
+    draws)."""
+
+    args: argparse.Namespace
+    config: EnvConfig
+    robot: Robot
+    terrain: Terrain
+    places: np.ndarray  # (num_envs, 3)
+    actions: np.ndarray  # (steps, num_envs, 12)
+    rng: np.random.Generator
+
+
+def rough_workload(doc: str | None) -> RoughWorkload:
+    """Parse the rough-terrain benchmarks' options (``--robot``, ``--num-envs``, ``--steps``, ``--rounds``, ``--json``;
+    ``doc`` the help text) and build their workload."""
+    args_parser = parser(doc)
     args_parser.add_argument("--robot", default="anymal_c")
     args_parser.add_argument("--num-envs", type=int, default=128)
     args_parser.add_argument("--steps", type=int, default=200)
     args_parser.add_argument("--rounds", type=int, default=3)
     args = args_parser.parse_args()
     config = EnvConfig(robot=args.robot, terrain="rough")
-    robot = load_robot(args.robot)
     terrain = rough_terrain(config.terrain_config, 0)
     rng = np.random.default_rng(0)
     places = drop_points(terrain, args.num_envs, rng)
     actions = rng.uniform(-0.3, 0.3, size=(args.steps, args.num_envs, 12))
+    return RoughWorkload(args, config, load_robot(args.robot), terrain, places, actions, rng)
+
+
+def main() -> None:
+    work = rough_workload(__doc__)
+    args, config, robot, terrain, places, actions, rng = (
+        work.args, work.config, work.robot, work.terrain, work.places, work.actions, work.rng
+    )  # fmt: skip
     t0 = time.perf_counter()
     boxes, count = box_model(Path(robot.xml_path).as_posix(), terrain)
     build_s = time.perf_counter() - t0

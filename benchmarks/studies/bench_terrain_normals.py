@@ -35,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_margin_rough_l
 import numpy as np
 from bench_margin_rough_levels import EVALUATION_SEED, visited_states
 
+from benchmarks.harness import write_record
 from margin_rl import load_robot
 from margin_rl.stability.analytic.extended import extended_margin_batch
 from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES, N_FEET
@@ -137,12 +138,8 @@ def main() -> int:
             f"| {100 * r['change_mean_m']:+.1f} | {100 * r['change_rms_m']:.1f} "
             f"| {100 * r['change_p5_m']:+.1f} to {100 * r['change_p95_m']:+.1f} | {r['sign_flip_share']:.1%} |"
         )
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        record = {"command": " ".join([Path(sys.executable).name, *sys.argv]), "robot": robot, "seed": args.seed,
-                  "tilt_deg": args.tilt_deg, "variants": {k: [str(p) for p in v] for k, v in variants.items()},
-                  "rows": rows}  # fmt: skip
-        args.json.write_text(json.dumps(record, indent=2) + "\n")
+    variants_run = {k: [str(p) for p in v] for k, v in variants.items()}
+    write_record(args.json, "terrain_normals", args, {"robot": robot, "variants": variants_run, "rows": rows})
     return 0
 
 

@@ -359,6 +359,35 @@ class AnymalCore:
         if rnd.push_interval_s is not None:
             self._next_push[ids] = rng.exponential(rnd.push_interval_s / self.dt, size=n)
 
+    def restart_on_levels(self, levels: Any) -> None:
+        """Start every environment afresh on the terrain curriculum's row ``levels[i]`` (a resumed training's
+        curriculum, saved with its checkpoint: without it a resumed run would start again from the lowest rows).
+
+        ``levels``: (num_envs,) integers in 0 .. ``curriculum_levels`` − 1 (a list, numpy or a tensor on any device).
+
+        Raises:
+            ValueError: the terrain has no curriculum, or ``levels`` has another length or a row outside it.
+        """
+        rows = self.terrain.levels
+        if not rows:
+            raise ValueError(
+                "restart_on_levels needs a terrain curriculum (TerrainConfig.curriculum_levels >= 2); this "
+                f"environment's terrain is {self.config.terrain!r} without one"
+            )
+        given = to_numpy(levels)
+        if given.shape != (self.num_envs,) or not np.issubdtype(given.dtype, np.integer):
+            raise ValueError(
+                f"levels: expected {self.num_envs} integers (one per environment), got shape {given.shape} of "
+                f"{given.dtype}; resume with the --num-envs the run was trained with"
+            )
+        if given.size and (given.min() < 0 or given.max() >= rows):
+            raise ValueError(
+                f"levels: rows must lie in 0..{rows - 1} (this curriculum's), got {given.min()}..{given.max()}"
+            )
+        self.terrain_level[:] = self._index(given)
+        self.episode_step[:] = 0  # no episode to judge: every environment keeps the row it is given
+        self.reset()
+
     def _move_between_levels(self, ids: Any) -> None:
         """The terrain curriculum's step at the end of the episodes of ``ids`` (:func:`~margin_rl.envs.terrain.
         next_levels`), before they are reset; environments that have not stepped since their last reset keep

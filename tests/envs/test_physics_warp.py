@@ -354,7 +354,8 @@ def test_the_height_scan_is_the_same_on_the_device() -> None:
 
 def test_the_terrain_curriculum_runs_on_the_device() -> None:
     """Levels, the level rule and spawning by level on the Warp core's tensors equal the mujoco.batch core's, from
-    the same state and the same draws: half the worlds carried 3 m (promoted), the others left standing (demoted)."""
+    the same state and the same draws: half the worlds carried 3 m (promoted), the others left standing (demoted);
+    then both restart on given rows (a resumed training's)."""
     from margin_rl.envs.terrain import TerrainConfig
 
     curriculum = TerrainConfig(size=8.0, tile=4.0, border=0.0, curriculum_levels=4, initial_max_level=3)
@@ -370,4 +371,11 @@ def test_the_terrain_curriculum_runs_on_the_device() -> None:
     np.testing.assert_array_equal(to_numpy(warp.terrain_level), reference.terrain_level)
     assert np.all(reference.terrain_level[1::2] == np.maximum(before[1::2] - 1, 0))  # demoted
     np.testing.assert_allclose(to_numpy(warp._spawn_xy), reference._spawn_xy)
+    np.testing.assert_allclose(to_numpy(warp.physics.qpos)[:, :2], reference.physics.qpos[:, :2], atol=1e-6)
+    # a resume's restart on saved rows (numpy rows into the device core, the same draws on both)
+    rows = np.arange(N) % 4
+    _mirror(reference, warp)
+    reference.restart_on_levels(rows)
+    warp.restart_on_levels(rows)
+    np.testing.assert_array_equal(to_numpy(warp.terrain_level), rows)
     np.testing.assert_allclose(to_numpy(warp.physics.qpos)[:, :2], reference.physics.qpos[:, :2], atol=1e-6)

@@ -197,3 +197,35 @@ def test_the_level_is_in_info_in_the_log_and_survives_pickling() -> None:
     flat.reset(seed=0)
     info = flat.step(np.zeros((2, 12))).info
     assert "terrain_level" not in info and "Curriculum/terrain_level_mean" not in step_tags(info)
+
+
+def test_restart_on_levels_puts_walked_environments_back_on_their_rows() -> None:
+    """A resumed training's curriculum: environments that have walked part of an episode start afresh on the rows
+    they are given (none promoted or demoted for the cut episode), from any array kind."""
+    core = _core()
+    for _ in range(20):
+        core.step(np.zeros((6, 12)))
+    core.restart_on_levels(torch.tensor([3, 2, 1, 0, 3, 2]))
+    np.testing.assert_array_equal(core.terrain_level, [3, 2, 1, 0, 3, 2])
+    np.testing.assert_array_equal(_row_of(core), core.terrain_level)
+    assert not core.episode_step.any()
+
+
+@pytest.mark.parametrize(
+    ("levels", "message"),
+    [
+        ([0, 1, 2], r"expected 6 integers .*--num-envs"),
+        ([0.0, 1.0, 2.0, 0.0, 1.0, 2.0], r"expected 6 integers .*float64"),
+        ([0, 1, 2, 3, 4, 0], r"rows must lie in 0\.\.3 .*got 0\.\.4"),
+        ([-1, 1, 2, 3, 0, 0], r"rows must lie in 0\.\.3 .*got -1\.\.3"),
+    ],
+)
+def test_restart_on_levels_names_what_is_wrong(levels: list, message: str) -> None:
+    core = _core()
+    before = core.terrain_level.copy()
+    with pytest.raises(ValueError, match=message):
+        core.restart_on_levels(levels)
+    np.testing.assert_array_equal(core.terrain_level, before)  # nothing changed
+    flat = AnymalCore(EnvConfig(robot="anymal_c", margin="none"), num_envs=2, seed=0)
+    with pytest.raises(ValueError, match=r"needs a terrain curriculum .*curriculum_levels >= 2"):
+        flat.restart_on_levels([0, 0])

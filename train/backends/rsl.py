@@ -21,8 +21,8 @@ of the same sizes; everything else is the new run's.
 
 Resume: the checkpoint restores actor, critic (with their observation normalisers), optimizer and learning
 rate (the adaptive schedule's), the iteration counter (the next iteration is numbered after the last completed
-one, so TensorBoard's x axis continues) and the torch/numpy generators. Episodes running at the stop are
-lost: the environments start fresh.
+one, so TensorBoard's x axis continues), the torch/numpy generators and, on a terrain curriculum, each
+environment's row. Episodes running at the stop are lost: the environments start fresh, on their rows.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from rsl_rl.env import VecEnv
 from rsl_rl.runners import OnPolicyRunner  # needs GIT_PYTHON_REFRESH without git: set in margin_rl.train
 from tensordict import TensorDict
 
-from margin_rl.arrays import generator_state, like, set_generator_state
+from margin_rl.arrays import generator_state, like, set_generator_state, to_numpy
 from margin_rl.atomic import atomic_write
 from margin_rl.envs.core import AnymalCore
 from margin_rl.train.config import to_dict
@@ -105,6 +105,17 @@ class RslVecEnv(VecEnv):
 
     def get_observations(self) -> TensorDict:
         return self._obs
+
+    def curriculum_levels(self) -> torch.Tensor | None:
+        """The terrain curriculum's row of each environment (N,) int64 on the CPU; None without a curriculum."""
+        if not self.core.terrain.levels:
+            return None
+        return torch.as_tensor(to_numpy(self.core.terrain_level), dtype=torch.int64)
+
+    def restart_on_levels(self, levels: torch.Tensor) -> None:
+        """Start every environment afresh on its saved curriculum row (:meth:`AnymalCore.restart_on_levels`)."""
+        self.core.restart_on_levels(levels)
+        self._obs = self._observations(self.core.observe_all())
 
     def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict[str, Any]]:
         out = self.core.step(actions.detach())
@@ -256,6 +267,7 @@ class CheckpointingRunner(OnPolicyRunner):
             "action_std": self.exploration.last_mean_std,  # mean over the actions, after the last update
             "torch_rng_state": torch.get_rng_state(),
             "numpy_rng_state": generator_state(self.adapter.core.rng),
+            "curriculum_levels": self.adapter.curriculum_levels(),  # None without a terrain curriculum
         }
         return saved
 
@@ -280,6 +292,9 @@ class CheckpointingRunner(OnPolicyRunner):
             set_generator_state(env_rng, saved)
         # else the run was trained on the other kind of physics (host <-> device): the environments' draws start
         # from this run's seed, as its episodes start fresh
+        levels = infos.get("curriculum_levels")  # absent in checkpoints written before it was saved
+        if levels is not None:
+            self.adapter.restart_on_levels(levels)
         # the std the run had reached: what a resume that adds no iteration (a finished run) saves again
         self.exploration.last_mean_std = infos.get("action_std")
 

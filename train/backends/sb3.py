@@ -16,8 +16,9 @@ Warm start (``init_from``): a new model begins with the policy weights of a trai
 optimizer, step count and schedules are the new run's).
 
 Resume: ``PPO.load`` restores the policy, optimizer and ``num_timesteps``; ``learn(reset_num_timesteps=False)``
-continues the step count, and the TensorBoard logger appends to the same folder. SB3 does not save its random
-generators, and episodes running at the stop are lost (the environments start fresh).
+continues the step count, and the TensorBoard logger appends to the same folder; on a terrain curriculum each
+environment's row travels in the checkpoint (``ThreadedPPO.curriculum_levels``). SB3 does not save its random
+generators, and episodes running at the stop are lost (the environments start fresh, on their rows).
 
 The TorchScript export is the deterministic actor: the Gaussian mean clipped to the action box, as SB3's
 ``predict(deterministic=True)`` returns it.
@@ -101,6 +102,12 @@ class Sb3VecEnv(VecEnv):
         self.stats.reset()
         self.reset_infos = [{} for _ in range(self.num_envs)]
         return to_numpy(self.core.observe_all())
+
+    def curriculum_levels(self) -> list[int] | None:
+        """The terrain curriculum's row of each environment; None without a curriculum."""
+        if not self.core.terrain.levels:
+            return None
+        return [int(level) for level in to_numpy(self.core.terrain_level)]
 
     def step_summary(self) -> dict[str, float]:
         """Per-step statistics of the last step (:func:`margin_rl.train.metrics.step_tags`); empty before it."""
@@ -242,6 +249,7 @@ class TrainingCallback(BaseCallback):
     def save_checkpoint(self) -> Path:
         """Write ``ckpt_<num_timesteps>.zip`` (the state after the last update)."""
         steps = int(self.model.num_timesteps)
+        self.model.curriculum_levels = self.venv.curriculum_levels()
         path = save_model(self.model, checkpoint_path(self.run_dir, steps, "sb3"))
         self.last_saved = steps
         self.hooks.checkpointed(path, steps)
@@ -285,9 +293,11 @@ class TrainingCallback(BaseCallback):
 class ThreadedPPO(PPO):
     """SB3's PPO with its update (``train``) run on ``update_threads`` torch threads (:func:`torch_threads`; None:
     the caller's setting), collection on the caller's. The saved zip is an ordinary PPO's (``PPO.load`` reads it);
-    the thread count is a setting of this process, not saved."""
+    the thread count is a setting of this process, not saved. ``curriculum_levels`` (each environment's terrain
+    curriculum row when a checkpoint was written; None without a curriculum) is saved with it for the resume."""
 
     update_threads: int | None = None
+    curriculum_levels: list[int] | None = None
 
     def train(self) -> None:
         with torch_threads(self.update_threads):
@@ -381,6 +391,8 @@ def train_sb3(
     if checkpoint is not None:
         warn_unpickling(checkpoint)
         model = ThreadedPPO.load(checkpoint, env=venv, device=device)
+        if model.curriculum_levels is not None:  # learn's first reset keeps the rows (no episode has run)
+            venv.core.restart_on_levels(model.curriculum_levels)
     else:
         model = make_model(venv, ppo, seed, device)
         if init_from is not None:

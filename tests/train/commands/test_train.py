@@ -253,3 +253,58 @@ def test_a_buffer_overflow_stops_a_warp_run_and_keeps_its_last_checkpoint(tmp_pa
     assert latest_checkpoint(run_dir) == kept and kept.is_file()
     assert train_module.main(["--resume", str(run_dir), "--total-steps", "384", "--no-progress", *warp]) == 0
     assert json.loads((run_dir / "progress.json").read_text())["env_steps"] == 384
+
+
+# 4 curriculum rows x 2 tiles of 4 m, no border: a terrain that builds in milliseconds; every row a starting row.
+SMALL_CURRICULUM = (
+    'terrain_config={"size": 8.0, "tile": 4.0, "border": 0.0, "curriculum_levels": 4, "initial_max_level": 3}'
+)
+
+
+def _saved_levels(checkpoint: Path) -> list[int]:
+    """Each environment's curriculum row saved in a checkpoint of either backend."""
+    if checkpoint.suffix == ".pt":
+        return torch.load(checkpoint, weights_only=True)["infos"]["curriculum_levels"].tolist()
+    from margin_rl.train.backends.sb3 import ThreadedPPO
+
+    return ThreadedPPO.load(checkpoint, device="cpu").curriculum_levels
+
+
+@pytest.mark.parametrize("backend", ["rsl", "sb3"])
+def test_a_resumed_run_keeps_each_environments_curriculum_row(
+    backend: str, tmp_path: Path, toy_weights: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The curriculum's rows travel in the checkpoint: the resumed environments start on the rows the run had
+    reached, not again on the starting rows (which the same seed would draw again)."""
+    from margin_rl.envs.core import AnymalCore
+
+    run_dir = tmp_path / "run"
+    rough = ["--env", "margin_rl/AnymalC-Rough-v1", "--env-option", SMALL_CURRICULUM]
+    # 8 envs x 48 steps: every 25-step episode has ended once, so the rows have moved from where they started.
+    assert train_module.main([*tiny_args(backend, run_dir, toy_weights, total=384, every=384), *rough]) == 0
+    reached = _saved_levels(latest_checkpoint(run_dir))
+    assert len(reached) == 8 and set(reached) <= {0, 1, 2, 3}
+    started = _started_levels(run_dir)
+    assert reached != started, "the curriculum did not move: the test cannot tell a restore from a fresh start"
+
+    given: list[list[int]] = []
+    original = AnymalCore.restart_on_levels
+
+    def record(core: AnymalCore, levels: object) -> None:
+        given.append([int(level) for level in levels])  # type: ignore[attr-defined]
+        original(core, levels)
+        assert core.terrain_level.tolist() == given[-1]
+
+    monkeypatch.setattr(AnymalCore, "restart_on_levels", record)
+    assert train_module.main(["--resume", str(run_dir), "--total-steps", "576", "--no-progress"]) == 0
+    assert given == [reached]
+    assert len(_saved_levels(latest_checkpoint(run_dir))) == 8
+
+
+def _started_levels(run_dir: Path) -> list[int]:
+    """The rows a run's environments start on: its environment built again with its config and seed."""
+    from margin_rl.train.environments import make_core
+    from margin_rl.train.runs import read_json
+
+    spec = train_module.TrainSpec.from_json(read_json(run_dir / "config.json"))
+    return make_core(spec.env_config, spec.num_envs, spec.seed).terrain_level.tolist()

@@ -17,7 +17,7 @@ out of every labelling. States: every ``--every``-th policy step after the first
 Usage::
 
     python benchmarks/studies/bench_margin_rough_levels.py --robot anymal_c [--levels 0.25 0.5 0.75 1.0]
-        [--bundle-seeds 3 4] [--weights anymal_c --weights data/candidate.npz]
+        [--bundle-seeds 3 4 | --runs runs/rough/c_mw0_s0 ...] [--weights anymal_c --weights data/candidate.npz]
         [--envs 8] [--steps 250] [--every 5] [--json docs/learned_margin/rough_levels_anymal_c.json]
     python benchmarks/studies/bench_margin_rough_levels.py --robot anymal_c --bundle-seeds 0 1 2 --seed 4000 \
         --levels 0.125 0.25 0.375 0.5 0.625 0.75 0.875 1 --envs 16 --every 1 --record data/rough_anymal_c_train.npz
@@ -100,6 +100,9 @@ def main() -> int:
     parser.add_argument("--robot", default="anymal_c", choices=("anymal_b", "anymal_c"))
     parser.add_argument("--levels", type=float, nargs="+", default=[0.25, 0.5, 0.75, 1.0])
     parser.add_argument("--bundle-seeds", type=int, nargs="+", default=None, help="only these training seeds' policies")
+    parser.add_argument(
+        "--runs", type=Path, nargs="+", default=None, help="these runs' policies (folders: final_model.pt) instead"
+    )
     parser.add_argument("--seed", type=int, default=EVALUATION_SEED, help="terrain and initial states")
     parser.add_argument(
         "--weights", action="append", default=None, help="learned margins to compare (default: the robot's default)"
@@ -110,10 +113,22 @@ def main() -> int:
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--record", type=Path, default=None, help="write the visited states (npz, key lam); no labels")
     args = parser.parse_args()
-    bundle = load_bundle(args.robot)
-    runs = [r for r in bundle.runs if args.bundle_seeds is None or r.seed in args.bundle_seeds]
-    if not runs:
-        parser.error(f"no policy of bundle {bundle.name} has a training seed in {args.bundle_seeds}")
+    if args.runs is not None:
+        if args.bundle_seeds is not None:
+            parser.error("--runs and --bundle-seeds choose the policies two ways: give one of them")
+        policies = {str(r): r / "final_model.pt" if r.is_dir() else r for r in args.runs}
+        for name, path in policies.items():
+            if not path.is_file():
+                parser.error(f"--runs {name}: no policy at {path} (a finished run's folder, or a checkpoint .pt)")
+            robot = resolve_env(load_policy(path), None, {})[1].robot
+            if robot != args.robot:
+                parser.error(f"--runs {name} was trained on {robot}, not --robot {args.robot}")
+    else:
+        bundle = load_bundle(args.robot)
+        runs = [r for r in bundle.runs if args.bundle_seeds is None or r.seed in args.bundle_seeds]
+        if not runs:
+            parser.error(f"no policy of bundle {bundle.name} has a training seed in {args.bundle_seeds}")
+        policies = {f"{r.variant} s{r.seed}": Path(r.policy) for r in runs}
     names = args.weights or [args.robot]  # the robot's name: the default network, what the environments use
     networks = {name: LearnedMargin.load(name) for name in names}
     rows, recorded = [], []
@@ -121,8 +136,8 @@ def main() -> int:
         for level in args.levels:
             t0 = time.perf_counter()
             states, falls = [], []
-            for run in runs:
-                lam, fell = visited_states(run.policy, level, args.envs, args.steps, args.every, args.seed)
+            for path in policies.values():
+                lam, fell = visited_states(path, level, args.envs, args.steps, args.every, args.seed)
                 states.append(lam)
                 falls.append(fell)
             lam = np.concatenate(states)
@@ -146,8 +161,7 @@ def main() -> int:
         np.savez_compressed(args.record, lam=lam.astype(np.float32))
         print(f"{len(lam):,} states: {args.record}")
         return 0
-    policies = ", ".join(f"{r.variant} s{r.seed}" for r in runs)
-    print(f"\n{args.robot}, learned margins against m_x (seed {args.seed}; policies {policies})\n")
+    print(f"\n{args.robot}, learned margins against m_x (seed {args.seed}; policies {', '.join(policies)})\n")
     print("| network | level (Fig. 8 = 1) | states | RMSE [cm] | bias [cm] | sign | outside training ranges |")
     print("|---|---|---|---|---|---|---|")
     for name, network in networks.items():
@@ -165,7 +179,7 @@ def main() -> int:
             "robot": args.robot,
             "weights_sha256": {name: network.card.get("sha256") for name, network in networks.items()},
             "seed": args.seed,
-            "policies": [{"variant": r.variant, "seed": r.seed} for r in runs],
+            "policies": list(policies),
             "min_slope_deg": MIN_SLOPE_DEG,
             "targets": {"rmse_m": RMSE_TARGET_M, "sign_agreement": SIGN_TARGET},
             "levels": rows,

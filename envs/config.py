@@ -10,7 +10,7 @@ given for ``EnvConfig.reward_params`` becomes a :class:`RewardParams` (its keys 
 
 The reward's added weights and parameters live in one mapping, ``EnvConfig.reward_params``
 (:class:`RewardParams`: ``alive_bonus``, ``knee_clearance``, ``knee_clearance_height``, ``base_height``,
-``base_height_fraction``, ``termination_penalty``, ``logistic_gain``);
+``base_height_fraction``, ``termination_penalty``, ``yaw_tracking``, ``logistic_gain``);
 until EnvConfig v1 (the ``-v1`` ids) they were top-level fields. Stored v0 configs are translated in one place,
 :func:`upgrade_stored_env_config` (table :data:`LEGACY_FIELDS`).
 """
@@ -315,6 +315,13 @@ class RewardParams(Mapping):
     # also makes the fall itself cost, which matters where falls come early (a policy walking onto a step it cannot
     # climb). The comparison gives both variants the same term.
     termination_penalty: float = 0.0
+    # Weight of the yaw-rate tracking reward L(gain (omega_cmd - omega_z)) (term "yaw_tracking", 0: off), added to
+    # any preset, as the field's velocity-tracking tasks track the yaw rate beside the linear velocity (legged_gym: half
+    # the linear term's weight). The paper's reward tracks the heading velocity only, and policies trained on it turn
+    # freely under a zero yaw command: on the terrain curriculum, whose promotion reads the distance from the spawn
+    # point, a policy walking in circles is demoted however well it walks. The comparison gives both variants the
+    # same term.
+    yaw_tracking: float = 0.0
     logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
 
     def __post_init__(self) -> None:
@@ -339,6 +346,12 @@ class RewardParams(Mapping):
         )
         check_number(
             f"{where}.termination_penalty", self.termination_penalty, minimum=0.0, hint="penalty per fall, 0: off"
+        )
+        check_number(
+            f"{where}.yaw_tracking",
+            self.yaw_tracking,
+            minimum=0.0,
+            hint="weight of the yaw-rate tracking reward, 0: off",
         )
         # L is even (L(x) = L(-x)), so only the gain's size matters; 0 would make the velocity term constant.
         check_number(f"{where}.logistic_gain", self.logistic_gain, minimum=0.0, min_open=True, hint="[s/m]")
@@ -494,6 +507,8 @@ class EnvConfig:
             weights["base_height"] = weights.get("base_height", 0.0) - params.base_height
         if params.termination_penalty:
             weights["termination"] = weights.get("termination", 0.0) - params.termination_penalty
+        if params.yaw_tracking:
+            weights["yaw_tracking"] = weights.get("yaw_tracking", 0.0) + params.yaw_tracking
         return weights
 
 

@@ -32,6 +32,13 @@ def velocity_tracking(s: Arrays, gain: float) -> Any:
     return logistic_kernel(gain * (s["command"][:, 0] - s["base_lin_vel"][:, 0]))
 
 
+def yaw_tracking(s: Arrays, gain: float) -> Any:
+    """L(gain (omega_cmd - omega_z)): the same kernel on the yaw rate [rad/s] about the base z axis, the gain read
+    in s/rad (RewardParams.yaw_tracking). The paper's reward tracks the heading velocity alone, so nothing keeps a
+    policy from turning under a zero yaw command: on rough ground its episodes then end near where they began."""
+    return logistic_kernel(gain * (s["command"][:, 2] - s["base_ang_vel"][:, 2]))
+
+
 def margin(s: Arrays, gain: float) -> Any:
     """The stability margin m(lambda) [m] (learned, analytic or zero)."""
     return s["margin"]
@@ -121,6 +128,7 @@ REWARD_TERMS: dict[str, Callable[[Arrays, float], Any]] = {
     f.__name__: f
     for f in (
         velocity_tracking,
+        yaw_tracking,
         margin,
         alive,
         lateral_velocity,

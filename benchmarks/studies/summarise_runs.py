@@ -36,6 +36,10 @@ METRICS = (
     "margin_mean",
     "return",
 )
+"""Metrics tabulated and compared with weight 0."""
+
+RECORDED = ("base_height_mean", "edge_landing_fraction", "forward_velocity_mean")
+"""Metrics kept in the record beside :data:`METRICS` and every fall's cause (``termination/<cause>``), not tabulated."""
 
 
 def run_summary(run: Path, eval_name: str) -> dict[str, object]:
@@ -58,13 +62,21 @@ def run_summary(run: Path, eval_name: str) -> dict[str, object]:
         "acceleration_filter": env.get("acceleration_filter"),
         "alive_bonus": reward_params.get("alive_bonus"),
         "knee_clearance": reward_params.get("knee_clearance", 0.0),
+        "termination_penalty": reward_params.get("termination_penalty", 0.0),
+        "recipe": config.get("recipe"),
         "init_from": config.get("init_from"),  # warm start (train --init-from), None: trained from scratch
         "evaluation": {
             "episodes": metrics.get("episodes"),
             "seed": metrics.get("seed"),
             "env_id": metrics.get("env_id"),
+            "forward_velocity": metrics.get("forward_velocity"),
+            "condition": metrics.get("condition"),
+            "terrain": (metrics.get("env_config") or {}).get("terrain"),
+            "terrain_config": (metrics.get("env_config") or {}).get("terrain_config"),
         },
-        "metrics": {k: metrics["summary"][k] for k in METRICS if k in metrics["summary"]},
+        "metrics": {
+            k: v for k, v in metrics["summary"].items() if k in METRICS or k in RECORDED or k.startswith("termination/")
+        },
     }
 
 

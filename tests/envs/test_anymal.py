@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 
 import margin_rl
 from margin_rl.envs import ANYMAL_ENV_IDS, EPISODE_STEPS
-from margin_rl.envs.config import EnvConfig, RandomizationConfig, TerminationConfig
+from margin_rl.envs.config import CommandConfig, EnvConfig, RandomizationConfig, TerminationConfig
 from margin_rl.envs.core import AnymalCore, heading_rotation, lambda_from_simulation
 from margin_rl.envs.observations import POLICY_OBSERVATIONS, observation_size
 from margin_rl.envs.terrain import STEP_EDGE_RISE
@@ -495,11 +495,34 @@ def test_termination_penalty_costs_exactly_the_falls() -> None:
     assert falls > 0  # the bound does end episodes, so the comparison above saw the term at work
 
 
+def test_yaw_tracking_is_the_kernel_of_the_yaw_rate_error() -> None:
+    """The term by hand: L(gain (omega_cmd - omega_z)) times its weight, from the base's angular velocity in its own
+    frame (MuJoCo's free-joint qvel[3:6]); a yaw command of 0.3 rad/s against a robot stepped with random actions;
+    off by default."""
+    options = dict(robot="anymal_b", margin="none", randomization=NO_NOISE,
+                   command=CommandConfig(forward_velocity=(0.5, 0.5), yaw_rate=(0.3, 0.3)))  # fmt: skip
+    off = AnymalCore(EnvConfig(**options), 2, seed=0)
+    on = AnymalCore(EnvConfig(**options, reward_params={"yaw_tracking": 0.5}), 2, seed=0)
+    off.reset(), on.reset()
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        actions = rng.uniform(-1, 1, (2, 12))
+        a, b = off.step(actions), on.step(actions)
+        assert "reward_yaw_tracking" not in a.info
+        yaw_rate = on.physics.qvel[:, 5]  # free joint: angular velocity in the body frame
+        x = 8.0 * (0.3 - yaw_rate)
+        expected = 0.5 / (np.exp(-x) + 2.0 + np.exp(x))
+        np.testing.assert_allclose(b.info["reward_yaw_tracking"], expected, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(b.reward - a.reward, expected, rtol=1e-9, atol=1e-12)
+
+
 @pytest.mark.parametrize(
     ("field", "value"),
     [
         ("termination_penalty", -1.0),
         ("termination_penalty", np.inf),
+        ("yaw_tracking", -0.5),
+        ("yaw_tracking", np.nan),
         ("knee_clearance", -1.0),
         ("knee_clearance_height", -0.1),
         ("knee_clearance", np.nan),

@@ -115,7 +115,7 @@ def test_bad_margin_weight_is_refused_at_make(value: object, error: type, messag
             TypeError,
             r"EnvConfig.reward_params: unknown key\(s\) \['alive_bonsu'\]; the known keys are alive_bonus, "
             r"knee_clearance, knee_clearance_height, base_height, base_height_fraction, termination_penalty, "
-            r"logistic_gain",
+            r"yaw_tracking, logistic_gain",
         ),
         (
             lambda: EnvConfig(reward_params=0.1),
@@ -295,6 +295,7 @@ NUMERIC_FIELDS: dict[type, list[str]] = {
         "base_height",
         "base_height_fraction",
         "termination_penalty",
+        "yaw_tracking",
         "logistic_gain",
     ],
     TerminationConfig: ["min_base_height", "max_tilt_rad"],
@@ -302,8 +303,8 @@ NUMERIC_FIELDS: dict[type, list[str]] = {
 }
 NUMBER_FIELDS = {
     "decimation", "action_scale", "episode_length_s", "margin_weight", "alive_bonus", "knee_clearance",
-    "knee_clearance_height", "base_height", "base_height_fraction", "termination_penalty", "logistic_gain",
-    "acceleration_filter", "push_force", "push_duration_s", "observation_noise", "reset_joint_noise",
+    "knee_clearance_height", "base_height", "base_height_fraction", "termination_penalty", "yaw_tracking",
+    "logistic_gain", "acceleration_filter", "push_force", "push_duration_s", "observation_noise", "reset_joint_noise",
     "reset_velocity_noise", "min_base_height", "max_tilt_rad", "size", "resolution", "tile", "max_slope_deg",
     "pad", "base_level", "max_height",
 }  # fmt: skip

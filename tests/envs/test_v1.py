@@ -135,9 +135,10 @@ def test_reward_params_is_one_checked_mapping() -> None:
         "base_height": 0.0,
         "base_height_fraction": 0.9,
         "termination_penalty": 0.0,
+        "yaw_tracking": 0.0,
         "logistic_gain": 8.0,
     }
-    assert params["alive_bonus"] == params.alive_bonus == 0.1 and len(params) == 7
+    assert params["alive_bonus"] == params.alive_bonus == 0.1 and len(params) == 8
     with pytest.raises(KeyError, match="the reward parameters are alive_bonus"):
         params["bonus"]
     assert EnvConfig(reward_params={"alive_bonus": 0.1}).reward_params == params

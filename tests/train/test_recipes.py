@@ -110,8 +110,13 @@ def test_rough_recipe_is_the_robust_one_on_the_curriculum_with_perception() -> N
     assert config.terrain == "rough" and config.terrain_config == CURRICULUM_TERRAIN
     assert config.terrain_config.curriculum_levels == 9
     assert config.height_scan and config.privileged_observations and rough.total_steps == 25_000_000
+    # the two terms the first pilots showed to be needed (docs/studies/rough_ground.md), on top of the robust ones
+    assert config.reward_params == robust.env_config.reward_params.replace(termination_penalty=10.0, yaw_tracking=0.5)
+    assert config.reward_weights["termination"] == -10.0 and config.reward_weights["yaw_tracking"] == 0.5
     flat = {"terrain": "flat", "terrain_config": robust.env_config.terrain_config}
-    flat_fields = config.replace(**flat, height_scan=False, privileged_observations=False)
+    flat_fields = config.replace(
+        **flat, height_scan=False, privileged_observations=False, reward_params=robust.env_config.reward_params
+    )
     assert flat_fields == robust.env_config  # everything else as the robust recipe, the margin weight included
     assert rough.ppo == robust.ppo
     assert train_module.TrainSpec.from_json(rough.to_json()) == rough  # the curriculum survives config.json

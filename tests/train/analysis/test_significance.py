@@ -209,6 +209,36 @@ def test_summarise_runs_compares_each_weight_with_weight_zero() -> None:
     assert module.versus_baseline([r for r in runs if r["margin_weight"] != 0]) == {}
 
 
+def test_summarise_runs_keeps_the_causes_of_falls_and_the_evaluation_terrain(tmp_path: Path) -> None:
+    """A run's record keeps every fall's cause, the rough measures and where it was evaluated, beside the tabulated
+    metrics; a metric neither tabulated nor recorded stays out."""
+    module = _study("summarise_runs")
+    run = tmp_path / "c_mw0_s0"
+    (run / "eval").mkdir(parents=True)
+    config = {
+        "env_id": "margin_rl/AnymalC-Rough-v1",
+        "seed": 0,
+        "recipe": "rough",
+        "env_config": {"robot": "anymal_c", "margin_weight": 0.0, "reward_params": {"termination_penalty": 10}},
+    }
+    summary = {
+        "fell": {"mean": 0.25, "std": 0.4},
+        "termination/tilt": {"mean": 0.125, "std": 0.3},
+        "edge_landing_fraction": {"mean": 0.1, "std": 0.05},
+        "lin_acc_peak_x": {"mean": 9.0, "std": 1.0},
+    }
+    metrics = {"episodes": 64, "seed": 5000, "env_id": config["env_id"], "forward_velocity": 0.75,
+               "condition": "nominal", "summary": summary,
+               "env_config": {"terrain": "rough", "terrain_config": {"step_height": [0.03, 0.09]}}}  # fmt: skip
+    (run / "config.json").write_text(json.dumps(config))
+    (run / "eval" / "metrics.json").write_text(json.dumps(metrics))
+    record = module.run_summary(run, "eval")
+    assert set(record["metrics"]) == {"fell", "termination/tilt", "edge_landing_fraction"}
+    assert record["termination_penalty"] == 10 and record["recipe"] == "rough"
+    assert record["evaluation"]["terrain_config"] == {"step_height": [0.03, 0.09]}
+    assert record["evaluation"]["forward_velocity"] == 0.75
+
+
 @settings(max_examples=60, deadline=None)
 @given(
     a=st.lists(st.floats(-100, 100), min_size=2, max_size=8),

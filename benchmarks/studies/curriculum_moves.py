@@ -4,8 +4,9 @@ The curriculum's mean level (``Curriculum/terrain_level_mean``) is the rough tra
 change has two causes a mean hides: an episode that falls early and one that walks too slowly are both demoted
 (:func:`margin_rl.envs.terrain.next_levels`). This runs a trained policy (deterministic actions) in its own training
 environment — the curriculum terrain, command range, randomisation and pushes of its run's ``config.json`` — with
-every environment starting on a given row, and tallies each environment's first episode by row: promoted, stayed, demoted; for
-demotions whether the episode fell (a termination) or timed out; and the commanded forward speed of each group.
+every environment starting on a given row, and tallies each environment's first episode by row: promoted, stayed,
+demoted; for demotions whether the episode fell (a termination) or timed out; and the commanded forward speed of each
+group.
 
 Usage::
 

@@ -234,6 +234,18 @@ def json_ready(value: Any) -> Any:
     return value
 
 
+def run_policies(parser: argparse.ArgumentParser, runs: Iterable[str | Path]) -> dict[str, Path]:
+    """The policy of each of ``runs`` by the name it was given: a run folder's ``final_model.pt``, or a policy file
+    itself; a missing one stops with a usage error naming it."""
+    policies = {}
+    for run in runs:
+        path = Path(run) / "final_model.pt" if Path(run).is_dir() else Path(run)
+        if not path.is_file():
+            parser.error(f"{run}: no policy at {path} (a finished run's folder, or a policy file)")
+        policies[str(run)] = path
+    return policies
+
+
 def write_record(
     path: Path | None, benchmark: str, args: argparse.Namespace | Mapping[str, Any], results: Any
 ) -> Path | None:

@@ -35,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository r
 
 import numpy as np
 
+from benchmarks.harness import run_policies
 from margin_rl import load_robot
 from margin_rl.envs.core import AnymalCore
 from margin_rl.envs.terrain import MIN_SLOPE_DEG, TerrainConfig, at_difficulty
@@ -116,10 +117,8 @@ def main() -> int:
     if args.runs is not None:
         if args.bundle_seeds is not None:
             parser.error("--runs and --bundle-seeds choose the policies two ways: give one of them")
-        policies = {str(r): r / "final_model.pt" if r.is_dir() else r for r in args.runs}
+        policies = run_policies(parser, args.runs)
         for name, path in policies.items():
-            if not path.is_file():
-                parser.error(f"--runs {name}: no policy at {path} (a finished run's folder, or a checkpoint .pt)")
             robot = resolve_env(load_policy(path), None, {})[1].robot
             if robot != args.robot:
                 parser.error(f"--runs {name} was trained on {robot}, not --robot {args.robot}")

@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_margin_rough_l
 import numpy as np
 from bench_margin_rough_levels import EVALUATION_SEED, visited_states
 
-from benchmarks.harness import write_record
+from benchmarks.harness import run_policies, write_record
 from margin_rl import load_robot
 from margin_rl.stability.analytic.extended import extended_margin_batch
 from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES, N_FEET
@@ -106,7 +106,7 @@ def main() -> int:
         for name, *runs in args.variant:
             if not runs:
                 parser.error(f"--variant {name!r} names no run")
-            variants[name] = [Path(r) / "final_model.pt" if Path(r).is_dir() else Path(r) for r in runs]
+            variants[name] = list(run_policies(parser, runs).values())
     robots = {resolve_env(load_policy(p), None, {})[1].robot for policies in variants.values() for p in policies}
     if len(robots) != 1:
         parser.error(f"the policies were trained on different robots {sorted(robots)}; study one robot at a time")

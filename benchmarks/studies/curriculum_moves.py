@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository r
 
 import numpy as np
 
-from benchmarks.harness import write_record
+from benchmarks.harness import run_policies, write_record
 from margin_rl.envs.core import AnymalCore
 from margin_rl.train.artifacts.policies import load_policy
 from margin_rl.train.commands.evaluate import resolve_env
@@ -96,9 +96,7 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=7000)
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
-    path = args.run / "final_model.pt" if args.run.is_dir() else args.run
-    if not path.is_file():
-        parser.error(f"no policy at {path} (a finished run's folder, or a checkpoint .pt)")
+    (path,) = run_policies(parser, [args.run]).values()
     t0 = time.perf_counter()
     with torch_threads(1):
         ends = episode_ends(path, args.rows, args.envs, args.seed)
@@ -116,8 +114,7 @@ def main() -> int:
             f"| {r['demoted_fell']} / {r['demoted_timed_out']} | {cp} / {cd} |"
         )
     print(f"({time.perf_counter() - t0:.0f} s)")
-    if args.json is not None:
-        write_record(args.json, "curriculum_moves", args, {"policy": str(path), "rows": rows})
+    write_record(args.json, "curriculum_moves", args, {"policy": str(path), "rows": rows})
     return 0
 
 

@@ -24,10 +24,12 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # bench_margin_rough_levels: the evaluation seed
 
 import numpy as np
+from bench_margin_rough_levels import EVALUATION_SEED
 
-from benchmarks.harness import write_record
+from benchmarks.harness import run_policies, write_record
 from margin_rl.envs.core import AnymalCore
 from margin_rl.envs.terrain import TerrainConfig, at_difficulty
 from margin_rl.robot import mjcf_names as names
@@ -36,8 +38,6 @@ from margin_rl.train.artifacts.bundle import load_bundle
 from margin_rl.train.artifacts.policies import load_policy
 from margin_rl.train.commands.evaluate import evaluation_config, resolve_env
 from margin_rl.train.runs import torch_threads
-
-EVALUATION_SEED = 5000
 
 
 def straightness(policy_path: Path, speed: float, seconds: float, envs: int, difficulty: float | None) -> dict:
@@ -89,10 +89,7 @@ def main() -> int:
     if args.bundled:
         policies = {f"{r.variant} s{r.seed}": Path(r.policy) for r in load_bundle(args.bundled).runs}
     else:
-        policies = {str(r): r / "final_model.pt" if r.is_dir() else r for r in args.runs}
-        for name, path in policies.items():
-            if not path.is_file():
-                parser.error(f"--runs {name}: no policy at {path} (a finished run's folder, or a policy file)")
+        policies = run_policies(parser, args.runs)
     t0, rows = time.perf_counter(), []
     with torch_threads(1):
         for name, path in policies.items():

@@ -31,6 +31,10 @@ from margin_rl.envs.margin_kinds import check_margin_kind
 from margin_rl.envs.terrain import TerrainConfig
 from margin_rl.robot import available_robots
 
+MARGIN_NORMALS: tuple[str, ...] = ("terrain", "vertical")
+"""The contact normals lambda may carry (:attr:`EnvConfig.margin_normals`): the terrain's under each foot, or vertical
+everywhere (the margin as if every contact stood on level ground)."""
+
 MAX_TERRAIN_GRID_SIDE = 4001
 """Most heightfield samples per side of a rough terrain (4001^2 float64 = 128 MB): a larger ``size /
 resolution`` is almost always a unit slip, and would exhaust memory before any error could be raised."""
@@ -413,6 +417,10 @@ class EnvConfig:
     margin: str = "learned"  # a name of margin_rl.envs.margin_kinds.MARGIN_KINDS
     margin_weight: float = 1.0  # weight of the margin term; 0 is the baseline of the comparison
     margin_weights: str | None = None  # learned-margin weights (.npz with its card); None: the robot's bundled
+    # The contact normals lambda carries, so the margin the reward and the critic see: "terrain" (seed 000: each
+    # foot's friction cone on the ground's normal under it) or "vertical" (every cone upright, as on flat ground: the
+    # ablation that asks what the terrain normals add). The evaluation conditions measure with "terrain" (conditions.py).
+    margin_normals: str = "terrain"
     # Weights of the terms added to any preset and the reward's parameters (RewardParams); a mapping of some
     # of its keys is accepted too: reward_params={"alive_bonus": 0.1} (the others keep their defaults here,
     # and keep the config's values in replace() and in gymnasium.make keywords).
@@ -460,6 +468,7 @@ class EnvConfig:
             f"{where}.margin_weight", self.margin_weight, minimum=0.0, hint="0: the baseline without the margin term"
         )
         check_optional_path(f"{where}.margin_weights", self.margin_weights)
+        check_choice(f"{where}.margin_normals", self.margin_normals, MARGIN_NORMALS)
         check_number(
             f"{where}.acceleration_filter",
             self.acceleration_filter,

@@ -69,7 +69,14 @@ from margin_rl.envs.stability_input import (
 )
 from margin_rl.envs.step_data import Accelerations, SimulationState, StepOutput, check_finite_outputs
 from margin_rl.envs.terminations import any_cause, info_key, termination_causes
-from margin_rl.envs.terrain import STEP_EDGE_RISE, Terrain, flat_terrain, next_levels, rough_terrain
+from margin_rl.envs.terrain import (
+    STEP_EDGE_RISE,
+    Terrain,
+    flat_terrain,
+    next_levels,
+    rough_terrain,
+    vertical_normals,
+)
 from margin_rl.robot import load_robot, quat_wxyz_to_matrix
 from margin_rl.robot import mjcf_names as names
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, StabilityState
@@ -565,12 +572,18 @@ class AnymalCore:
             state.feet,
             self.mu,
             state.contacts,
-            self.terrain.normal(state.feet[..., :2]),
+            self._contact_normals(state.feet[..., :2]),
         )
         lam = stability.to_lambda()
         margin = self.xp.clip(self._margin_fn(lam), *MARGIN_CLIP)
         self._last_margin, self._last_lambda = margin, lam
         return stability, margin
+
+    def _contact_normals(self, feet_xy: Any) -> Any:
+        """(N, 4, 3) world-frame normals under the feet that lambda carries (:attr:`EnvConfig.margin_normals`)."""
+        if self.config.margin_normals == "vertical":
+            return vertical_normals(feet_xy)
+        return self.terrain.normal(feet_xy)
 
     def _track_air_time(self, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Touchdowns (N, 4) and each touching-down foot's time in the air [s] (0 elsewhere).

@@ -152,8 +152,7 @@ class Terrain:
         xp = namespace(xy)
         xy = xp.astype(xp.asarray(xy), xp.float64, copy=False)
         if self.heights is None:
-            up = xp.asarray([0.0, 0.0, 1.0], dtype=xp.float64, device=device_of(xy))
-            return xp.asarray(xp.broadcast_to(up, (*xy.shape[:-1], 3)), copy=True)
+            return vertical_normals(xy)
         d = self.resolution
         ex = xp.asarray([d, 0.0], dtype=xp.float64, device=device_of(xy))
         ey = xp.asarray([0.0, d], dtype=xp.float64, device=device_of(xy))
@@ -173,6 +172,14 @@ class Terrain:
         ring = np.concatenate([np.zeros((1, 2)), radius * np.column_stack([np.cos(angles), np.sin(angles)])])
         samples = self.height(xy[..., None, :] + like(ring, xy))  # (..., points + 1)
         return xp.max(samples, axis=-1) - xp.min(samples, axis=-1)
+
+
+def vertical_normals(xy: Any) -> Any:
+    """The world's vertical (0, 0, 1) under every point (..., 2): flat ground's normals, float64 (..., 3) in the kind
+    and on the device of ``xy``."""
+    xp = namespace(xy)
+    up = xp.asarray([0.0, 0.0, 1.0], dtype=xp.float64, device=device_of(xy))
+    return xp.asarray(xp.broadcast_to(up, (*xy.shape[:-1], 3)), copy=True)
 
 
 STEP_EDGE_RISE = 0.02

@@ -285,6 +285,52 @@ def test_edge_touchdowns_are_feet_landing_where_the_ground_under_the_sole_rises(
         assert not out.info["edge_touchdowns"].any()
 
 
+def test_vertical_margin_normals_change_only_the_normals_lambda_carries(toy_weights: str) -> None:
+    """``margin_normals="vertical"``: the same robots dropped over the rough tiles with the same actions as with the
+    terrain's normals, so the same physics; lambda differs in its normals alone, which are (0, 0, 1) for every foot,
+    while the terrain's tilt under some feet; and the margin is the network's on the terrain run's lambda with its
+    normals set upright (an independent evaluation)."""
+    from margin_rl.envs.core import MARGIN_CLIP
+    from margin_rl.stability.analytic.lambda_state import LAMBDA_SLICES
+    from margin_rl.stability.learned.model import LearnedMargin
+
+    n = 6
+    config = EnvConfig(robot="anymal_c", terrain="rough", margin_weights=toy_weights, randomization=NO_NOISE)
+    cores = [AnymalCore(config.replace(margin_normals=kind), n, seed=0) for kind in ("terrain", "vertical")]
+    xy = np.random.default_rng(2).uniform(-8.0, 8.0, (n, 2))  # off the flat spawn pads
+    for core in cores:
+        core.reset()
+        core.physics.qpos[:, 0:2] = xy
+        core.physics.qpos[:, 2] = core.terrain.height(xy) + 0.6
+        core.physics.forward()
+    rng = np.random.default_rng(3)
+    normals = LAMBDA_SLICES["normals"]
+    others = np.ones(47, dtype=bool)
+    others[normals] = False
+    tilted = 0
+    network = LearnedMargin.load(toy_weights)
+    for _ in range(30):
+        action = rng.uniform(-1, 1, (n, 12))
+        terrain_out, vertical_out = (core.step(action) for core in cores)
+        terrain_lam, vertical_lam = (core.last_lambda for core in cores)
+        np.testing.assert_array_equal(terrain_lam[:, others], vertical_lam[:, others])
+        np.testing.assert_array_equal(vertical_lam[:, normals], np.tile([0.0, 0.0, 1.0], (n, 4)))
+        tilted += int((terrain_lam[:, normals].reshape(n, 4, 3)[..., 2] < np.cos(np.radians(1.0))).sum())
+        upright = terrain_lam.copy()
+        upright[:, normals] = np.tile([0.0, 0.0, 1.0], (n, 4))
+        expected = np.clip(network(upright), *MARGIN_CLIP)
+        np.testing.assert_allclose(vertical_out.info["margin"], expected, rtol=1e-5, atol=1e-6)
+        if terrain_out.terminated.any() or terrain_out.truncated.any():
+            break
+    assert tilted > 0
+
+
+@pytest.mark.parametrize("value", ["upright", None, 1])
+def test_unknown_margin_normals_are_named(value: object) -> None:
+    with pytest.raises(ValueError, match=r"EnvConfig\.margin_normals must be one of \['terrain', 'vertical'\]"):
+        EnvConfig(margin_normals=value)
+
+
 def test_unknown_option_is_named() -> None:
     with pytest.raises(TypeError, match=r"unexpected keyword argument 'margin_wieght'.*margin_weight"):
         gym.make("margin_rl/AnymalB-v1", margin_wieght=1.0)

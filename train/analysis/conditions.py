@@ -13,7 +13,10 @@ environment's :class:`~margin_rl.envs.config.RandomizationConfig`:
   the robot's MJCF by name): the model mismatch of a payload or a lighter shell.
 * ``training``: the training environment unchanged (its randomisation on), e.g. to see what the policy met.
 
-The command, terrain and everything else stay the training environment's (``evaluate`` fixes the command).
+Every condition but ``training`` also measures the margin on the terrain's contact normals
+(:attr:`~margin_rl.envs.config.EnvConfig.margin_normals` ``"terrain"``), the seed's margin, whatever normals the
+policy was trained with, so that the margins of every variant of a comparison are the same quantity. The command,
+terrain and everything else stay the training environment's (``evaluate`` fixes the command).
 """
 
 from __future__ import annotations
@@ -41,10 +44,14 @@ def nominal_randomization(training: RandomizationConfig) -> RandomizationConfig:
     )
 
 
+def measured(config: EnvConfig, randomization: RandomizationConfig) -> EnvConfig:
+    """``config`` with ``randomization`` and the seed's margin (terrain normals): an evaluation world."""
+    return config.replace(randomization=randomization, margin_normals="terrain")
+
+
 def _friction(mu: float) -> Callable[[EnvConfig], EnvConfig]:
     def apply(config: EnvConfig) -> EnvConfig:
-        randomization = dataclasses.replace(nominal_randomization(config.randomization), friction=(mu, mu))
-        return config.replace(randomization=randomization)
+        return measured(config, dataclasses.replace(nominal_randomization(config.randomization), friction=(mu, mu)))
 
     return apply
 
@@ -53,13 +60,13 @@ def _base_mass(relative: float) -> Callable[[EnvConfig], EnvConfig]:
     def apply(config: EnvConfig) -> EnvConfig:
         added = relative * base_mass(config.robot)
         randomization = dataclasses.replace(nominal_randomization(config.randomization), added_base_mass=(added, added))
-        return config.replace(randomization=randomization)
+        return measured(config, randomization)
 
     return apply
 
 
 def _nominal(config: EnvConfig) -> EnvConfig:
-    return config.replace(randomization=nominal_randomization(config.randomization))
+    return measured(config, nominal_randomization(config.randomization))
 
 
 CONDITIONS: dict[str, Callable[[EnvConfig], EnvConfig]] = {

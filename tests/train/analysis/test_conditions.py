@@ -37,6 +37,14 @@ def test_nominal_turns_the_training_randomisation_off_and_keeps_the_reset_noise(
     assert condition_config(TRAINING, "training") == TRAINING
 
 
+@pytest.mark.parametrize("name", sorted(CONDITIONS))
+def test_every_condition_but_training_measures_the_margin_on_the_terrain_normals(name: str) -> None:
+    """A policy trained on upright normals (the ablation) is measured on the seed's margin, like every other."""
+    upright = TRAINING.replace(terrain="rough", margin_normals="vertical")
+    expected = "vertical" if name == "training" else "terrain"
+    assert condition_config(upright, name).margin_normals == expected
+
+
 @pytest.mark.parametrize("mu", [0.4, 1.0])
 def test_friction_conditions_set_the_floor_in_every_environment(mu: float) -> None:
     config = condition_config(TRAINING, f"friction_{mu}")

@@ -151,8 +151,13 @@ def main(argv: list[str] | None = None) -> int:
     args.out.with_suffix(".json").write_text(json.dumps(record, indent=2, allow_nan=True) + "\n")
     for tag, variants in by_tag.items():
         for name, v in variants.items():
-            last = next((m for m in reversed(v["mean"]) if np.isfinite(m)), float("nan"))
-            print(f"{tag}: {name}: {last:.3g} in the last bin (centred at {v['steps'][-1] / 1e6:.2f}M steps)")
+            # A variant's runs may stop short of the longest run's last bin: quote its own last filled bin.
+            filled = [(step, m) for step, m in zip(v["steps"], v["mean"], strict=True) if np.isfinite(m)]
+            if not filled:
+                print(f"{tag}: {name}: no value")
+                continue
+            step, last = filled[-1]
+            print(f"{tag}: {name}: {last:.3g} in its last filled bin (centred at {step / 1e6:.2f}M steps)")
     print(f"wrote {figure} and {args.out.with_suffix('.json')}")
     return 0
 

@@ -62,3 +62,15 @@ def test_main_writes_the_figure_and_the_record(tmp_path: Path) -> None:
     record = json.loads((tmp_path / "lc.json").read_text())
     assert set(record["tags"]["Curriculum/terrain_level_mean"]) == {"without margin", "with margin (0.1)"}
     assert (tmp_path / "lc.png").stat().st_size > 0
+
+
+def test_the_printed_last_value_names_the_bin_it_comes_from(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """The binning's trailing bin may be empty (NaN); the line quotes the last filled bin's value and centre."""
+    batch = 512 * 24
+    run = fake_run(tmp_path, "a", 0.0, {0: 1.0, 1: 2.0, 2: 3.0, 3: 4.0}, {})
+    args = [str(run), "--tags", "Curriculum/terrain_level_mean", "--bin-steps", str(2 * batch)]
+    assert lc.main([*args, "--out", str(tmp_path / "lc")]) == 0
+    record = json.loads((tmp_path / "lc.json").read_text())["tags"]["Curriculum/terrain_level_mean"]["without margin"]
+    assert np.isnan(record["mean"][-1])  # the empty trailing bin, centred at 5 batches
+    expected = f"without margin: 3.5 in its last filled bin (centred at {3 * batch / 1e6:.2f}M steps)"
+    assert expected in capsys.readouterr().out

@@ -63,6 +63,8 @@ def run_summary(run: Path, eval_name: str) -> dict[str, object]:
         "alive_bonus": reward_params.get("alive_bonus"),
         "knee_clearance": reward_params.get("knee_clearance", 0.0),
         "termination_penalty": reward_params.get("termination_penalty", 0.0),
+        "yaw_tracking": reward_params.get("yaw_tracking", 0.0),
+        "margin_normals": env.get("margin_normals", "terrain"),  # stored before the option: the terrain's
         "recipe": config.get("recipe"),
         "init_from": config.get("init_from"),  # warm start (train --init-from), None: trained from scratch
         "evaluation": {

@@ -219,7 +219,12 @@ def test_summarise_runs_keeps_the_causes_of_falls_and_the_evaluation_terrain(tmp
         "env_id": "margin_rl/AnymalC-Rough-v1",
         "seed": 0,
         "recipe": "rough",
-        "env_config": {"robot": "anymal_c", "margin_weight": 0.0, "reward_params": {"termination_penalty": 10}},
+        "env_config": {
+            "robot": "anymal_c",
+            "margin_weight": 0.0,
+            "margin_normals": "vertical",
+            "reward_params": {"termination_penalty": 10, "yaw_tracking": 0.5},
+        },
     }
     summary = {
         "fell": {"mean": 0.25, "std": 0.4},
@@ -235,6 +240,7 @@ def test_summarise_runs_keeps_the_causes_of_falls_and_the_evaluation_terrain(tmp
     record = module.run_summary(run, "eval")
     assert set(record["metrics"]) == {"fell", "termination/tilt", "edge_landing_fraction"}
     assert record["termination_penalty"] == 10 and record["recipe"] == "rough"
+    assert record["yaw_tracking"] == 0.5 and record["margin_normals"] == "vertical"
     assert record["evaluation"]["terrain_config"] == {"step_height": [0.03, 0.09]}
     assert record["evaluation"]["forward_velocity"] == 0.75
 

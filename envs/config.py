@@ -419,7 +419,7 @@ class EnvConfig:
     margin_weights: str | None = None  # learned-margin weights (.npz with its card); None: the robot's bundled
     # The contact normals lambda carries, so the margin the reward and the critic see: "terrain" (seed 000: each
     # foot's friction cone on the ground's normal under it) or "vertical" (every cone upright, as on flat ground: the
-    # ablation that asks what the terrain normals add). The evaluation conditions measure with "terrain" (conditions.py).
+    # ablation that asks what the terrain normals add). Evaluation conditions measure with "terrain" (conditions.py).
     margin_normals: str = "terrain"
     # Weights of the terms added to any preset and the reward's parameters (RewardParams); a mapping of some
     # of its keys is accepted too: reward_params={"alive_bonus": 0.1} (the others keep their defaults here,

@@ -34,6 +34,7 @@ import os
 import sys
 import tempfile
 import time
+import traceback
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -143,8 +144,11 @@ def step_runners(num_envs: int, steps: int, device: str) -> dict[str, Callable[[
     return {"physics": raw_step, "env_learned": env_step("learned"), "env_no_margin": env_step("none")}
 
 
-def physics_and_env(sizes: list[int], steps: int, rounds: int, device: str) -> dict[str, Any]:
-    """Stages 1 and 2: raw physics and the environment core, interleaved per round, at every size."""
+def physics_and_env(
+    sizes: list[int], steps: int, rounds: int, device: str, partial: Callable[[dict[str, Any]], None]
+) -> dict[str, Any]:
+    """Stages 1 and 2: raw physics and the environment core, interleaved per round, at every size (``partial``
+    is called with the results so far after each size)."""
     results: dict[str, Any] = {}
     for num_envs in sizes:
         runners = step_runners(num_envs, steps, device)
@@ -163,11 +167,13 @@ def physics_and_env(sizes: list[int], steps: int, rounds: int, device: str) -> d
             "env_no_margin_over_physics": medians["env_no_margin"] / medians["physics"],
         }
         del runners
+        partial(results)
     return results
 
 
-def ppo(sizes: list[int], iterations: int, device: str) -> dict[str, Any]:
-    """Stage 3: rsl-rl PPO end to end with the robust recipe's settings on the learner's device."""
+def ppo(sizes: list[int], iterations: int, device: str, partial: Callable[[dict[str, Any]], None]) -> dict[str, Any]:
+    """Stage 3: rsl-rl PPO end to end with the robust recipe's settings on the learner's device (``partial`` as
+    in :func:`physics_and_env`)."""
     from rsl_rl.runners import OnPolicyRunner
 
     from margin_rl.train.backends.rsl import rsl_vec_env
@@ -190,11 +196,15 @@ def ppo(sizes: list[int], iterations: int, device: str) -> dict[str, Any]:
         steps = iterations * num_envs * spec.ppo.steps_per_env
         results[str(num_envs)] = {"env_steps_per_s": steps / elapsed, "iterations": iterations, "env_steps": steps}
         del runner, env
+        partial(results)
     return results
 
 
-def training(args: argparse.Namespace, settings: dict[str, Any], out: Path) -> dict[str, Any]:
-    """Stage 4: both variants of the robust recipe, each trained then evaluated checkpoint by checkpoint."""
+def training(
+    args: argparse.Namespace, settings: dict[str, Any], partial: Callable[[dict[str, Any]], None]
+) -> dict[str, Any]:
+    """Stage 4: both variants of the robust recipe, each trained then evaluated checkpoint by checkpoint
+    (``partial`` as in :func:`physics_and_env`, after each variant)."""
     from benchmarks.studies.bench_learning_speed import FALL_FRACTION_TARGET, VELOCITY_ERROR_TARGET
     from margin_rl.train.commands.evaluate import evaluate
     from margin_rl.train.commands.train import build_parser, spec_from_args, train
@@ -238,6 +248,7 @@ def training(args: argparse.Namespace, settings: dict[str, Any], out: Path) -> d
             "checkpoints": rows,
             "final_model": str(result.final_model),
         }
+        partial(results)
     return results
 
 
@@ -277,19 +288,38 @@ def main(argv: list[str] | None = None) -> int:
     print(machine_line(LIBRARIES), flush=True)
     record = Record(args.out / JSON_NAME, {**settings, "smoke": args.smoke})
     started = time.perf_counter()
-    if "physics_and_env" in args.stages:
-        record.stage(
-            "physics_and_env",
-            physics_and_env(settings["num_envs"], settings["steps"], settings["rounds"], settings["device"]),
-        )
-    if "ppo" in args.stages:
-        record.stage("ppo", ppo(settings["num_envs"], settings["ppo_iterations"], settings["device"]))
-    if "training" in args.stages:
-        record.stage("training", training(args, settings, args.out))
+    stages: dict[str, Callable[[Callable[[dict[str, Any]], None]], dict[str, Any]]] = {
+        "physics_and_env": lambda partial: physics_and_env(
+            settings["num_envs"], settings["steps"], settings["rounds"], settings["device"], partial
+        ),
+        "ppo": lambda partial: ppo(settings["num_envs"], settings["ppo_iterations"], settings["device"], partial),
+        "training": lambda partial: training(args, settings, partial),
+    }
+    failed = [name for name in stages if name in args.stages and not run_stage(record, name, stages[name])]
     record.data["wall_seconds"] = time.perf_counter() - started
     record.write()
-    print(f"wrote {record.path} ({record.data['wall_seconds']:.0f} s)")
-    return 0
+    print(f"wrote {record.path} ({record.data['wall_seconds']:.0f} s)" + (f"; failed: {failed}" if failed else ""))
+    return 1 if failed else 0
+
+
+def run_stage(record: Record, name: str, measure: Callable[[Callable[[dict[str, Any]], None]], dict[str, Any]]) -> bool:
+    """Run one stage, writing its results as they come; a stage that raises is recorded with its traceback and the
+    next one runs (on a new device one failure must not cost the other stages' figures). True when it completed."""
+
+    def partial(results: dict[str, Any]) -> None:
+        record.data["stages"][name] = {**results, "complete": False}
+        record.write()
+
+    try:
+        record.stage(name, {**measure(partial), "complete": True})
+        return True
+    except Exception as exc:
+        so_far = record.data["stages"].get(name, {})
+        record.stage(name, {**so_far, "complete": False, "error": f"{type(exc).__name__}: {exc}"})
+        record.data["stages"][name]["traceback"] = traceback.format_exc()
+        record.write()
+        print(traceback.format_exc(), file=sys.stderr, flush=True)
+        return False
 
 
 if __name__ == "__main__":

@@ -59,6 +59,34 @@ SUMMARY_METRICS: dict[str, str] = {
     "fell": "falls [fraction of episodes]",
 }
 """The comparison table's columns: metric name -> label with unit."""
+TERRAIN_METRICS: dict[str, str] = {
+    "edge_landing_fraction": "feet landing on step edges [fraction of touchdowns]",
+    **{
+        f"termination/{cause}": f"ended by {cause.replace('_', ' ')} [fraction of episodes]"
+        for cause in CAUSE_NAMES
+        if cause != "diverged"  # the simulator's failure, not the policy's: never a fall (``fell``)
+    },
+}
+"""Further comparison columns where the evaluation terrain is not flat: the causes of the falls (several may end one
+episode) and the touchdowns on step edges. On flat ground nearly every fall is a tilt or a base contact and no foot
+meets an edge, so the flat tables leave them out."""
+METRIC_LABELS: dict[str, str] = {**SUMMARY_METRICS, **TERRAIN_METRICS}
+"""Every comparison column, in table order: metric name -> label with unit."""
+
+
+def comparison_metrics(terrain: str) -> dict[str, str]:
+    """The comparison's columns for an evaluation on ``terrain`` (``EnvConfig.terrain``): :data:`SUMMARY_METRICS`,
+    and :data:`TERRAIN_METRICS` too where the terrain is not flat."""
+    return dict(SUMMARY_METRICS) if terrain == "flat" else dict(METRIC_LABELS)
+
+
+def table_metrics(variants: Mapping[str, Mapping[str, Any]]) -> dict[str, str]:
+    """The columns of a comparison report: the :data:`METRIC_LABELS` entries its variants have a mean of (a report
+    made before the terrain columns existed has the summary columns only)."""
+    present = {key for variant in variants.values() for key in variant.get("mean", {})}
+    return {key: label for key, label in METRIC_LABELS.items() if key in present}
+
+
 ACCELERATION_PREFIXES: tuple[str, ...] = ("lin_acc_", "ang_acc_")
 
 
@@ -324,13 +352,14 @@ def _mean_std_cell(mean: float | None, std: float | None) -> str:
 
 def summary_table(variants: Mapping[str, Mapping[str, Any]]) -> list[str]:
     """Markdown lines of the comparison table: a header, then per variant its margin weight and the
-    mean ± std of every :data:`SUMMARY_METRICS` column (``variants[name]`` has ``margin_weight``, ``mean``
+    mean ± std of every column of :func:`table_metrics` (``variants[name]`` has ``margin_weight``, ``mean``
     and ``std`` dicts; missing or non-finite values print as n/a)."""
+    columns = table_metrics(variants)
     lines = [
-        "| variant | margin weight | " + " | ".join(SUMMARY_METRICS.values()) + " |",
-        "|---|---|" + "---|" * len(SUMMARY_METRICS),
+        "| variant | margin weight | " + " | ".join(columns.values()) + " |",
+        "|---|---|" + "---|" * len(columns),
     ]
     for name, v in variants.items():
-        cells = [_mean_std_cell(v["mean"].get(k), v["std"].get(k)) for k in SUMMARY_METRICS]
+        cells = [_mean_std_cell(v["mean"].get(k), v["std"].get(k)) for k in columns]
         lines.append(f"| {name} | {v['margin_weight']:g} | " + " | ".join(cells) + " |")
     return lines

@@ -8,7 +8,16 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from margin_rl.train.metrics import EpisodeStatistics, step_tags
+from margin_rl.envs.terminations import CAUSE_NAMES
+from margin_rl.train.metrics import (
+    METRIC_LABELS,
+    SUMMARY_METRICS,
+    TERRAIN_METRICS,
+    EpisodeStatistics,
+    comparison_metrics,
+    step_tags,
+    table_metrics,
+)
 
 N = 6
 
@@ -65,3 +74,13 @@ def test_episode_statistics_on_tensors_equal_numpys(seed: int, warmup: int) -> N
     for key, values in closed.items():
         np.testing.assert_allclose(closed_t[key], values, rtol=1e-12, atol=1e-12, err_msg=key)
     assert ended > 0  # the comparison met finished episodes, not only running sums
+
+
+def test_the_comparison_columns_add_the_fall_causes_and_edge_landings_off_flat_ground() -> None:
+    assert comparison_metrics("flat") == SUMMARY_METRICS
+    assert comparison_metrics("rough") == METRIC_LABELS == {**SUMMARY_METRICS, **TERRAIN_METRICS}
+    causes = {key.removeprefix("termination/") for key in TERRAIN_METRICS if key.startswith("termination/")}
+    assert causes == set(CAUSE_NAMES) - {"diverged"}  # every fall cause, from the terminations' own list
+    # a report's columns are the labelled metrics it has a mean of, in table order; unknown keys are not columns
+    variants = {"a": {"mean": {"fell": 0.1, "edge_landing_fraction": 0.2, "return": 3.0, "lin_acc_rms": 1.0}}}
+    assert list(table_metrics(variants)) == ["lin_acc_rms", "fell", "edge_landing_fraction"]

@@ -43,7 +43,7 @@ import numpy as np
 from scipy import stats
 
 from margin_rl.train.analysis.conditions import DEFAULT_CONDITION
-from margin_rl.train.metrics import SUMMARY_METRICS
+from margin_rl.train.metrics import SUMMARY_METRICS, table_metrics
 
 ALPHA = 0.05
 RESAMPLES = 10_000
@@ -231,7 +231,8 @@ def compare_variants(
     resamples: int = RESAMPLES,
     seed: int = 0,
 ) -> dict[str, Difference]:
-    """Every :data:`~margin_rl.train.metrics.SUMMARY_METRICS` entry of ``other`` against ``baseline``.
+    """Every column of the report (:func:`~margin_rl.train.metrics.table_metrics`: the summary metrics, and on
+    rough ground the terrain metrics) of ``other`` against ``baseline``.
 
     ``variants_report``: ``report["variants"]`` of :func:`margin_rl.train.commands.compare.evaluate_variants` (each
     variant
@@ -245,7 +246,7 @@ def compare_variants(
         metric: compare_seeds(
             metric, seed_values(a, metric), seed_values(b, metric), alpha, resamples, seed, (baseline, other)
         )
-        for metric in SUMMARY_METRICS
+        for metric in table_metrics({baseline: a, other: b})
     }
 
 

@@ -23,12 +23,13 @@ measured for the baseline too. Outputs in ``<out>``:
   per base-frame axis, from the first training seed and the first evaluation episode;
 * ``compare.md`` and ``compare.json``: mean ± std over training seeds (each seed's value is its mean over the
   evaluation episodes) of velocity tracking error, base linear and angular acceleration RMS, stance width,
-  margin and falls, with every run's numbers in the JSON. A metric an evaluation could not compute (e.g. the
-  acceleration RMS of episodes shorter than ``--warmup-s``) is ``null`` there with its reason in the run's
-  ``"not_computed": {metric: reason}`` and listed under the Markdown table (both only when it happens); and, per
-  metric, the difference with − without margin over the training seeds with a two-sided Welch test, the interval
-  that inverts it and a bootstrap interval (``"statistics"`` in the JSON, a second table in the Markdown;
-  :mod:`margin_rl.train.analysis.significance`).
+  margin and falls (on rough ground also each fall cause and the feet landing on step edges:
+  :data:`~margin_rl.train.metrics.TERRAIN_METRICS`), with every run's numbers in the JSON. A metric an evaluation
+  could not compute (e.g. the acceleration RMS of episodes shorter than ``--warmup-s``) is ``null`` there with its
+  reason in the run's ``"not_computed": {metric: reason}`` and listed under the Markdown table (both only when it
+  happens); and, per metric, the difference with − without margin over the training seeds with a two-sided Welch
+  test, the interval that inverts it and a bootstrap interval (``"statistics"`` in the JSON, a second table in the
+  Markdown; :mod:`margin_rl.train.analysis.significance`).
 
 ``--eval-commands 0.5 1.0 --eval-conditions friction_0.4 mass_-20 mass_+20`` also evaluates every policy in each
 (condition, command) cell of the grid (conditions of :mod:`margin_rl.train.analysis.conditions`; the main cell is
@@ -87,7 +88,7 @@ from margin_rl.train.commands.options import (
 )
 from margin_rl.train.commands.train import DEFAULT_BACKEND, DEFAULT_NUM_ENVS, TrainSpec, load_spec, make_spec, train
 from margin_rl.train.environments import DEFAULT_ENV
-from margin_rl.train.metrics import SUMMARY_METRICS, mean_std, summary_table
+from margin_rl.train.metrics import METRIC_LABELS, comparison_metrics, mean_std, summary_table
 from margin_rl.train.recipes import get_recipe, with_recipe
 from margin_rl.train.runs import (
     CONFIG_FILE,
@@ -248,7 +249,7 @@ def _evaluate_cell(
     report: dict[str, Any] = {}
     examples: dict[str, Evaluation] = {}
     for name, (weight, policies) in variants.items():
-        runs = []
+        runs, terrain = [], "flat"
         for seed, policy in policies:
             config = find_run_config(policy, levels=1)
             in_run = config is not None and (config.parent / PROGRESS_FILE).is_file()
@@ -280,11 +281,12 @@ def _evaluate_cell(
                 write_json(eval_dir / REQUEST_FILE, request)
                 examples.setdefault(name, evaluation)
             summary = {k: v["mean"] for k, v in metrics["summary"].items()}
+            terrain = metrics.get("env_config", {}).get("terrain", "flat")  # the same for every run of a comparison
             run_dir = str(config.parent) if in_run else None
             runs.append({"seed": seed, "run_dir": run_dir, "policy": str(policy), "metrics": summary})
             if metrics.get("not_computed"):  # null in "metrics": say why (present only then)
                 runs[-1]["not_computed"] = metrics["not_computed"]
-        table = {key: mean_std([r["metrics"][key] for r in runs]) for key in SUMMARY_METRICS}
+        table = {key: mean_std([r["metrics"][key] for r in runs]) for key in comparison_metrics(terrain)}
         report[name] = {
             "margin_weight": weight,
             "runs": runs,
@@ -347,12 +349,12 @@ def write_markdown(report: dict[str, Any], path: Path) -> Path:
         for name, variant in report["variants"].items()
         for run in variant["runs"]
         for key, reason in run.get("not_computed", {}).items()
-        if key in SUMMARY_METRICS
+        if key in METRIC_LABELS
     ]
     if missing:
         lines += ["", "Not computed (n/a, or left out of a mean):", *missing]
     if report.get("statistics"):
-        rows = [((SUMMARY_METRICS.get(k, k),), difference) for k, difference in report["statistics"].items()]
+        rows = [((METRIC_LABELS.get(k, k),), difference) for k, difference in report["statistics"].items()]
         lines += [
             "",
             "Differences with − without margin over training seeds (the unit: one seed's mean over its episodes): "

@@ -17,7 +17,7 @@ from scipy import stats
 
 from margin_rl.train.analysis.significance import Difference, compare_seeds, compare_variants, difference_table
 from margin_rl.train.commands.compare import write_markdown
-from margin_rl.train.metrics import SUMMARY_METRICS, summary_table
+from margin_rl.train.metrics import SUMMARY_METRICS, TERRAIN_METRICS, summary_table
 
 ROOT = Path(__file__).resolve().parents[3]
 seed_groups = st.lists(st.floats(-1e3, 1e3, allow_nan=False), min_size=2, max_size=8)
@@ -147,6 +147,19 @@ def test_compare_variants_covers_every_table_metric() -> None:
     assert differences["margin_mean"].significant is True and differences["fell"].n_a == 2
     with pytest.raises(ValueError, match="no variant 'baseline'"):
         compare_variants(variants, baseline="baseline")
+
+
+def test_compare_variants_covers_the_terrain_columns_where_the_report_has_them() -> None:
+    variants = _report()
+    for variant in variants.values():  # a rough-ground report: every run also has the terrain metrics
+        for run in variant["runs"]:
+            run["metrics"].update({key: 0.1 * run["seed"] for key in TERRAIN_METRICS})
+        variant["mean"].update({key: 0.1 for key in TERRAIN_METRICS})
+        variant["std"].update({key: 0.08 for key in TERRAIN_METRICS})
+    differences = compare_variants(variants)
+    assert list(differences) == [*SUMMARY_METRICS, *TERRAIN_METRICS]  # table order
+    assert differences["edge_landing_fraction"].difference == pytest.approx(0.0)
+    assert summary_table(variants)[0].endswith(" | ".join(TERRAIN_METRICS.values()) + " |")
 
 
 def test_write_markdown_adds_the_statistics_table_after_the_unchanged_one(tmp_path: Path) -> None:

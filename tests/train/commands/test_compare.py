@@ -12,7 +12,7 @@ import torch
 from margin_rl.train.artifacts.bundle import card_markdown
 from margin_rl.train.commands.compare import main
 from margin_rl.train.commands.evaluate import evaluate
-from margin_rl.train.metrics import SUMMARY_METRICS
+from margin_rl.train.metrics import SUMMARY_METRICS, TERRAIN_METRICS
 
 
 def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) -> None:
@@ -30,7 +30,7 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
     assert report["variants"]["without margin"]["margin_weight"] == 0.0
     assert report["variants"]["with margin"]["margin_weight"] == 2.0
     for variant in report["variants"].values():
-        assert set(SUMMARY_METRICS) <= set(variant["mean"]) and set(SUMMARY_METRICS) <= set(variant["std"])
+        assert set(variant["mean"]) == set(SUMMARY_METRICS) == set(variant["std"])  # flat: no terrain columns
         assert len(variant["runs"]) == 1 and Path(variant["runs"][0]["policy"]).is_file()
         assert all(v is not None for v in variant["mean"].values())  # finite: the baseline's margin too
     markdown = (out / "compare.md").read_text()
@@ -89,6 +89,22 @@ def test_compare_writes_png_markdown_and_json(tmp_path: Path, toy_weights: str) 
         ["| nominal", "0.75"], ["| nominal", "1"], ["| friction_0.4", "0.75"], ["| friction_0.4", "1"],
     ]  # fmt: skip
     assert rows[0].count(" → ") == 4
+    # On rough ground the fall causes and the step-edge landings join the table and the statistics.
+    rough = tmp_path / "rough"
+    assert main(["--eval-episodes", "2", "--warmup-s", "0.1", "--terrain-difficulty", "0.5", "--runs", *runs,
+                 "--out", str(rough)]) == 0  # fmt: skip
+    rough_report = json.loads((rough / "compare.json").read_text())
+    columns = {**SUMMARY_METRICS, **TERRAIN_METRICS}
+    for name, variant in rough_report["variants"].items():
+        assert set(variant["mean"]) == set(columns), name
+        run_metrics = variant["runs"][0]["metrics"]
+        for key in TERRAIN_METRICS:  # one seed: its mean over episodes is the variant's mean
+            expected = run_metrics[key]  # None where no episode gave a value (e.g. no touchdown)
+            assert variant["mean"][key] == (None if expected is None else pytest.approx(expected))
+    assert set(rough_report["statistics"]) == set(columns)
+    assert "termination/thigh_contact" in TERRAIN_METRICS and "termination/diverged" not in TERRAIN_METRICS
+    rough_markdown = (rough / "compare.md").read_text()
+    assert all(rough_markdown.count(f" {label} |") == 2 for label in TERRAIN_METRICS.values())  # both tables
 
 
 def test_bundle_round_trip_evaluates_like_the_runs(tmp_path: Path, toy_weights: str) -> None:

@@ -4,6 +4,10 @@ Usage (on a machine with a GPU; about 5 minutes including Warp's kernel compile)
 
     python benchmarks/speed/bench_gpu.py --device cuda:0 --out "$OUT"
     python benchmarks/speed/bench_gpu.py --smoke --out /tmp/bench_gpu      # every stage, small, on Warp's CPU device
+    python benchmarks/speed/bench_gpu.py --env margin_rl/AnymalC-Rough-v1 --recipe rough --stages physics_and_env
+
+``--env`` and ``--recipe`` choose the environment and training recipe of every stage (default: the robust recipe
+on flat ANYmal C); the rough recipe's environment has the terrain curriculum and the actor's height scan.
 
 Stages, in this order, each appended to ``<out>/bench_gpu.json`` as soon as it is measured (a run cut short keeps
 what it measured):
@@ -107,12 +111,13 @@ def timed_rate(step: Callable[[int], None], steps: int, num_envs: int, device: s
     return num_envs * steps / (time.perf_counter() - t0)
 
 
-def make_core(num_envs: int, device: str, margin: str) -> Any:
-    """The robust recipe's environment core of ANYmal C on the Warp backend at ``device``."""
+def make_core(num_envs: int, device: str, margin: str, env_id: str = ROBOT_ID, recipe: str = RECIPE) -> Any:
+    """The environment core of ``recipe`` on ``env_id`` (default: the robust recipe on flat ANYmal C) on the Warp
+    backend at ``device``."""
     from margin_rl.envs.core import AnymalCore
     from margin_rl.train.commands.train import build_parser, spec_from_args
 
-    spec, _, _ = spec_from_args(build_parser().parse_args(["--env", ROBOT_ID, "--recipe", RECIPE]))
+    spec, _, _ = spec_from_args(build_parser().parse_args(["--env", env_id, "--recipe", recipe]))
     config = spec.env_config.replace(margin=margin)
     core = AnymalCore(config, num_envs, seed=0, physics="warp", physics_device=device)
     core.reset(seed=0)
@@ -124,12 +129,14 @@ def random_actions(steps: int, num_envs: int, device: str) -> torch.Tensor:
     return (torch.rand((steps, num_envs, 12), generator=generator, dtype=torch.float64) * 2 - 1).to(device)
 
 
-def step_runners(num_envs: int, steps: int, device: str) -> dict[str, Callable[[int], None]]:
+def step_runners(
+    num_envs: int, steps: int, device: str, env_id: str = ROBOT_ID, recipe: str = RECIPE
+) -> dict[str, Callable[[int], None]]:
     """Configuration -> ``run(k)``, policy step k of one fixed sequence of random actions: the raw physics (the
     servo targets the core would write, computed beforehand, then the decimated step) and the core with and without
     the learned margin."""
     actions = random_actions(steps, num_envs, device)
-    raw = make_core(num_envs, device, "none")
+    raw = make_core(num_envs, device, "none", env_id, recipe)
     physics, decimation = raw.physics, raw.config.decimation
     targets = (raw._key_ctrl + raw.config.action_scale * actions).to(physics.ctrl.dtype)
 
@@ -138,20 +145,26 @@ def step_runners(num_envs: int, steps: int, device: str) -> dict[str, Callable[[
         physics.step(decimation)
 
     def env_step(margin: str) -> Callable[[int], None]:
-        core = make_core(num_envs, device, margin)
+        core = make_core(num_envs, device, margin, env_id, recipe)
         return lambda k: core.step(actions[k])
 
     return {"physics": raw_step, "env_learned": env_step("learned"), "env_no_margin": env_step("none")}
 
 
 def physics_and_env(
-    sizes: list[int], steps: int, rounds: int, device: str, partial: Callable[[dict[str, Any]], None]
+    sizes: list[int],
+    steps: int,
+    rounds: int,
+    device: str,
+    partial: Callable[[dict[str, Any]], None],
+    env_id: str = ROBOT_ID,
+    recipe: str = RECIPE,
 ) -> dict[str, Any]:
     """Stages 1 and 2: raw physics and the environment core, interleaved per round, at every size (``partial``
     is called with the results so far after each size)."""
     results: dict[str, Any] = {}
     for num_envs in sizes:
-        runners = step_runners(num_envs, steps, device)
+        runners = step_runners(num_envs, steps, device, env_id, recipe)
         for run in runners.values():  # warm-up: kernels compiled and loaded, graphs captured, torch modules built
             for k in range(min(3, steps)):
                 run(k)
@@ -171,7 +184,14 @@ def physics_and_env(
     return results
 
 
-def ppo(sizes: list[int], iterations: int, device: str, partial: Callable[[dict[str, Any]], None]) -> dict[str, Any]:
+def ppo(
+    sizes: list[int],
+    iterations: int,
+    device: str,
+    partial: Callable[[dict[str, Any]], None],
+    env_id: str = ROBOT_ID,
+    recipe: str = RECIPE,
+) -> dict[str, Any]:
     """Stage 3: rsl-rl PPO end to end with the robust recipe's settings on the learner's device (``partial`` as
     in :func:`physics_and_env`)."""
     from rsl_rl.runners import OnPolicyRunner
@@ -182,7 +202,7 @@ def ppo(sizes: list[int], iterations: int, device: str, partial: Callable[[dict[
 
     results: dict[str, Any] = {}
     for num_envs in sizes:
-        argv = ["--env", ROBOT_ID, "--recipe", RECIPE, "--num-envs", str(num_envs), "--device", device]
+        argv = ["--env", env_id, "--recipe", recipe, "--num-envs", str(num_envs), "--device", device]
         spec, _, _ = spec_from_args(build_parser().parse_args(argv))
         env = rsl_vec_env(spec.target, num_envs, 0, device, "warp", device)  # what `train --physics warp` builds
         with quiet_stdout(True):  # rsl-rl prints the networks and a block per iteration
@@ -213,9 +233,9 @@ def training(
     device = settings["device"]
     results: dict[str, Any] = {}
     runs_root = Path(args.runs_root) if args.runs_root else Path(tempfile.mkdtemp(prefix="bench_gpu_runs_"))
-    for weight in (0.0, get_recipe(RECIPE).margin_weight):
+    for weight in (0.0, get_recipe(settings["recipe"]).margin_weight):
         argv = [
-            "--env", ROBOT_ID, "--recipe", RECIPE, "--margin-weight", str(weight),
+            "--env", settings["env_id"], "--recipe", settings["recipe"], "--margin-weight", str(weight),
             "--num-envs", str(settings["train_envs"]), "--total-steps", str(settings["train_steps"]),
             "--checkpoint-every", str(max(1, settings["train_steps"] // 5)), "--device", device,
         ]  # fmt: skip
@@ -257,6 +277,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--smoke", action="store_true", help="every stage, small, on Warp's CPU device")
     parser.add_argument("--device", default="cuda:0", help="Warp and torch device (default cuda:0)")
     parser.add_argument("--out", type=Path, default=Path(os.environ.get("OUT", ".")), help="folder of the JSON")
+    parser.add_argument("--env", default=ROBOT_ID, help=f"the environment id (default {ROBOT_ID})")
+    parser.add_argument("--recipe", default=RECIPE, help=f"the training recipe of every stage (default {RECIPE})")
     parser.add_argument("--num-envs", type=int, nargs="+", default=[1024, 4096, 8192])
     parser.add_argument("--steps", type=int, default=100, help="policy steps per round (stages 1, 2)")
     parser.add_argument("--rounds", type=int, default=3)
@@ -272,6 +294,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     settings: dict[str, Any] = {
         "device": args.device,
+        "env_id": args.env,
+        "recipe": args.recipe,
         "num_envs": args.num_envs,
         "steps": args.steps,
         "rounds": args.rounds,
@@ -290,9 +314,22 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     stages: dict[str, Callable[[Callable[[dict[str, Any]], None]], dict[str, Any]]] = {
         "physics_and_env": lambda partial: physics_and_env(
-            settings["num_envs"], settings["steps"], settings["rounds"], settings["device"], partial
+            settings["num_envs"],
+            settings["steps"],
+            settings["rounds"],
+            settings["device"],
+            partial,
+            settings["env_id"],
+            settings["recipe"],
         ),
-        "ppo": lambda partial: ppo(settings["num_envs"], settings["ppo_iterations"], settings["device"], partial),
+        "ppo": lambda partial: ppo(
+            settings["num_envs"],
+            settings["ppo_iterations"],
+            settings["device"],
+            partial,
+            settings["env_id"],
+            settings["recipe"],
+        ),
         "training": lambda partial: training(args, settings, partial),
     }
     failed = [name for name in stages if name in args.stages and not run_stage(record, name, stages[name])]

@@ -51,3 +51,11 @@ def test_a_stage_that_raises_is_recorded_with_its_traceback_and_the_next_stage_s
     assert failed["error"] == "RuntimeError: graph capture failed" and "broken_physics" in failed["traceback"]
     assert failed["4"]["env_steps_per_s"]["physics"] == 1.0 and not failed["complete"]  # what was measured is kept
     assert stages["ppo"] == {"4": {"env_steps_per_s": 2.0}, "complete": True}
+
+
+def test_the_rough_recipes_environment_runs_its_stages_on_warps_cpu_device(tmp_path: Path) -> None:
+    argv = ["--smoke", "--env", "margin_rl/AnymalC-Rough-v1", "--recipe", "rough", "--stages", "physics_and_env"]
+    assert bench_gpu.main([*argv, "--out", str(tmp_path)]) == 0
+    record = json.loads((tmp_path / bench_gpu.JSON_NAME).read_text())
+    assert record["settings"]["env_id"] == "margin_rl/AnymalC-Rough-v1" and record["settings"]["recipe"] == "rough"
+    assert list(record["stages"]) == ["physics_and_env"] and record["stages"]["physics_and_env"]["complete"]

@@ -96,6 +96,14 @@ class Record:
         atomic_write_text(self.path, json.dumps(self.data, indent=2, default=float) + "\n")
 
 
+STARTED = time.perf_counter()
+
+
+def progress(message: str) -> None:
+    """A line with the seconds since the script started: a run cut short by its time limit shows where it was."""
+    print(f"[{time.perf_counter() - STARTED:7.1f} s] {message}", flush=True)
+
+
 def synchronize(device: str) -> None:
     if device.startswith("cuda"):
         torch.cuda.synchronize(device)
@@ -164,20 +172,29 @@ def physics_and_env(
     is called with the results so far after each size)."""
     results: dict[str, Any] = {}
     for num_envs in sizes:
+        clock = time.perf_counter()
         runners = step_runners(num_envs, steps, device, env_id, recipe)
-        for run in runners.values():  # warm-up: kernels compiled and loaded, graphs captured, torch modules built
+        setup = {"build_s": time.perf_counter() - clock}
+        progress(f"{num_envs} environments: three cores built in {setup['build_s']:.1f} s")
+        for name, run in runners.items():  # warm-up: kernels compiled and loaded, graphs captured, modules built
+            clock = time.perf_counter()
             for k in range(min(3, steps)):
                 run(k)
+            synchronize(device)
+            setup[f"warm_up_{name}_s"] = time.perf_counter() - clock
+            progress(f"{num_envs} environments: {name} warmed up in {setup[f'warm_up_{name}_s']:.1f} s")
         rates: dict[str, list[float]] = {name: [] for name in runners}
-        for _ in range(rounds):
+        for round_index in range(rounds):
             for name, run in runners.items():
                 rates[name].append(timed_rate(run, steps, num_envs, device))
+            progress(f"{num_envs} environments: round {round_index + 1} of {rounds}")
         medians = {name: float(np.median(values)) for name, values in rates.items()}
         results[str(num_envs)] = {
             "env_steps_per_s": medians,
             "rounds": rates,
             "env_learned_over_physics": medians["env_learned"] / medians["physics"],
             "env_no_margin_over_physics": medians["env_no_margin"] / medians["physics"],
+            "setup_seconds": setup,
         }
         del runners
         partial(results)
@@ -205,6 +222,7 @@ def ppo(
         argv = ["--env", env_id, "--recipe", recipe, "--num-envs", str(num_envs), "--device", device]
         spec, _, _ = spec_from_args(build_parser().parse_args(argv))
         env = rsl_vec_env(spec.target, num_envs, 0, device, "warp", device)  # what `train --physics warp` builds
+        progress(f"PPO, {num_envs} environments: environment built")
         with quiet_stdout(True):  # rsl-rl prints the networks and a block per iteration
             runner = OnPolicyRunner(env, spec.backend_config("bench"), log_dir=None, device=device)
             runner.learn(num_learning_iterations=1)  # warm-up: graphs, kernels, the optimizer's state
@@ -215,6 +233,7 @@ def ppo(
             elapsed = time.perf_counter() - t0
         steps = iterations * num_envs * spec.ppo.steps_per_env
         results[str(num_envs)] = {"env_steps_per_s": steps / elapsed, "iterations": iterations, "env_steps": steps}
+        progress(f"PPO, {num_envs} environments: {steps / elapsed:,.0f} env-steps/s")
         del runner, env
         partial(results)
     return results
@@ -248,6 +267,7 @@ def training(
             if not timeline or timeline[-1][0] != steps:  # the final checkpoint is reported again at the end
                 timeline.append((steps, time.perf_counter() - t0, path))
 
+        progress(f"training, margin weight {weight:g}: started")
         result = train(spec, run_dir, progress=False, physics="warp", physics_device=device, on_checkpoint=checkpointed)
         rows = []
         for steps, seconds, path in timeline:

@@ -38,12 +38,12 @@ def test_every_stage_runs_small_on_warps_cpu_device_and_writes_its_record(tmp_pa
 def test_a_stage_that_raises_is_recorded_with_its_traceback_and_the_next_stage_still_runs(
     tmp_path: Path, monkeypatch
 ) -> None:
-    def broken_physics(sizes, steps, rounds, device, partial):
+    def broken_physics(sizes, steps, rounds, device, partial, env_id, recipe):
         partial({"4": {"env_steps_per_s": {"physics": 1.0}}})  # one size measured before the failure
         raise RuntimeError("graph capture failed")
 
     monkeypatch.setattr(bench_gpu, "physics_and_env", broken_physics)
-    monkeypatch.setattr(bench_gpu, "ppo", lambda sizes, iterations, device, partial: {"4": {"env_steps_per_s": 2.0}})
+    monkeypatch.setattr(bench_gpu, "ppo", lambda *args: {"4": {"env_steps_per_s": 2.0}})
     argv = ["--smoke", "--out", str(tmp_path), "--stages", "physics_and_env", "ppo"]
     assert bench_gpu.main(argv) == 1
     stages = json.loads((tmp_path / bench_gpu.JSON_NAME).read_text())["stages"]

@@ -18,6 +18,14 @@ printed in bold.
 ``--per-robot lateral:45 longitudinal:75`` prints instead one table per robot, the README's: a column per command, a
 row per measure (falls, velocity error, accelerations, stance width, push survival at the pushes named, the model
 mismatch conditions summarised), each with its p.
+
+``--rough D REPORT`` (repeatable; no ``--robot`` needed) prints the README's **rough-ground** table instead: one row
+per evaluation terrain difficulty ``D`` and command of a ``compare`` report or bundle card evaluated on that terrain
+(``compare --runs ... --terrain-difficulty D --eval-commands ...``), with the falls as counts, the fall causes as
+counts (several causes can end one episode), velocity error, both accelerations and the feet landing on step
+edges, each "without → with" with Welch's p over seeds::
+
+    python benchmarks/studies/headline_table.py --rough 0.5 d0.5/compare.json --rough 0.75 d0.75/compare.json
 """
 
 from __future__ import annotations
@@ -82,6 +90,57 @@ def flat_rows(robot: str, report: dict[str, Any]) -> list[str]:
         seeds = report["seeds"][VARIANTS[1]]
         row = f"| {robot} | {cell['forward_velocity']:g} | {seeds} | {falls_text(cell, report['seeds'], episodes)} |"
         for metric, fmt, relative in FLAT_METRICS:
+            a, b = (cell["variants"][name]["mean"][metric] for name in VARIANTS)
+            row += f" {_change_text(a, b, fmt, cell['statistics'][metric], relative)} |"
+        rows.append(row)
+    return rows
+
+
+ROUGH_METRICS = (
+    ("velocity_error_mean", ".3f", False),
+    ("lin_acc_rms", ".2f", True),
+    ("ang_acc_rms", ".0f", True),
+    ("edge_landing_fraction", ".3f", False),
+)
+"""(metric, format, show the relative change) of the rough-ground table, after the falls and their causes."""
+ROUGH_CAUSES = ("thigh_contact", "base_contact", "tilt", "base_height")
+"""The fall causes the rough table counts (``termination/<cause>``), in its order."""
+ROUGH_HEADER = (
+    "| terrain difficulty | command [m/s] | seeds per variant | falls "
+    "| falls by thigh / base contact / tilt / low base | velocity error [m/s] | base lin. acc. RMS [m/s²] "
+    "| base ang. acc. RMS [rad/s²] | landings on step edges |"
+)
+
+
+def causes_text(cell: dict[str, Any], seeds: dict[str, int], episodes: int) -> str:
+    """Per variant the episodes each of :data:`ROUGH_CAUSES` ended, "t / b / i / h", as counts over all seeds'
+    episodes, "without → with"."""
+    parts = []
+    for name in VARIANTS:
+        total, mean = episodes * seeds[name], cell["variants"][name]["mean"]
+        parts.append(" / ".join(str(round(mean[f"termination/{cause}"] * total)) for cause in ROUGH_CAUSES))
+    return " → ".join(parts)
+
+
+def rough_rows(difficulty: str, report: dict[str, Any]) -> list[str]:
+    """The rough-ground table's rows of one report evaluated at terrain ``difficulty``, commands ascending."""
+    episodes = int(report["settings"]["eval_episodes"])
+    rows = []
+    for cell in nominal_cells(report):
+        missing = [
+            f"termination/{c}" for c in ROUGH_CAUSES if f"termination/{c}" not in cell["variants"][VARIANTS[0]]["mean"]
+        ]
+        if missing:
+            raise ValueError(
+                f"the report at difficulty {difficulty} has no {missing[0]!r}: it was not evaluated on rough ground "
+                "(compare --terrain-difficulty D) or predates the terrain columns; evaluate it again"
+            )
+        seeds = report["seeds"][VARIANTS[1]]
+        row = (
+            f"| {difficulty} | {cell['forward_velocity']:g} | {seeds} | {falls_text(cell, report['seeds'], episodes)} "
+            f"| {causes_text(cell, report['seeds'], episodes)} |"
+        )
+        for metric, fmt, relative in ROUGH_METRICS:
             a, b = (cell["variants"][name]["mean"][metric] for name in VARIANTS)
             row += f" {_change_text(a, b, fmt, cell['statistics'][metric], relative)} |"
         rows.append(row)
@@ -185,10 +244,16 @@ def robot_table(report: dict[str, Any], push: dict[str, Any], pushes: list[tuple
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument(
+        "--rough",
+        nargs=2,
+        action="append",
+        metavar=("DIFFICULTY", "CARD_OR_COMPARE_JSON"),
+        help="print the rough-ground table instead: a terrain difficulty and the report evaluated there (repeatable)",
+    )
+    parser.add_argument(
         "--robot",
         nargs=3,
         action="append",
-        required=True,
         metavar=("LABEL", "CARD_OR_COMPARE_JSON", "PUSH_JSON"),
         help="a robot's label, its bundle card.json or compare.json, and its push_recovery.json",
     )
@@ -202,6 +267,14 @@ def main(argv: list[str] | None = None) -> int:
         "these pushes, e.g. lateral:45 longitudinal:75",
     )
     args = parser.parse_args(argv)
+    if args.rough:
+        print(ROUGH_HEADER)
+        print("|---|---|---|---|---|---|---|---|---|")
+        for difficulty, path in args.rough:
+            print("\n".join(rough_rows(difficulty, as_report(json.loads(Path(path).read_text())))))
+        return 0
+    if not args.robot:
+        parser.error("give --robot LABEL REPORT PUSH_JSON (the flat and push tables) or --rough D REPORT")
     loaded = [
         (label, as_report(json.loads(Path(c).read_text())), json.loads(Path(p).read_text()))
         for label, c, p in args.robot

@@ -444,3 +444,52 @@ def test_headline_robot_table_is_the_flat_rows_pushes_and_mismatch_by_command() 
     mismatch = cells(rows[-1])
     assert mismatch[0] == f"model mismatch ({', '.join(conditions)})"
     assert all(cell.startswith("falls within +1 pt in ") and "/ 3)" in cell for cell in mismatch[1:])
+
+
+def test_headline_rough_rows_count_falls_and_their_causes_over_every_seeds_episodes() -> None:
+    """--rough: per command of a report evaluated on rough ground, the falls and each cause as counts over seeds ×
+    episodes (fractions × episodes, summed over seeds), the metrics "without → with" with the report's own p."""
+    module = _study("headline_table")
+
+    def rough_variants(falls: list[float], thigh: list[float], shift: float) -> dict:
+        variants = {}
+        for name, fell, thighs in (("without margin", falls, thigh), ("with margin", [0.0] * 3, [0.0] * 3)):
+            runs = []
+            for seed in range(3):
+                metrics = {key: 1.0 + shift * (name == "with margin") + 0.01 * seed for key in SUMMARY_METRICS}
+                metrics.update({key: 0.0 for key in TERRAIN_METRICS})
+                metrics.update({"fell": fell[seed], "termination/thigh_contact": thighs[seed]})
+                metrics["termination/tilt"] = fell[seed] - thighs[seed]
+                runs.append({"seed": seed, "metrics": metrics})
+            keys = [*SUMMARY_METRICS, *TERRAIN_METRICS]
+            mean = {k: float(np.mean([r["metrics"][k] for r in runs])) for k in keys}
+            std = {k: float(np.std([r["metrics"][k] for r in runs])) for k in keys}
+            variants[name] = {"margin_weight": 0.1 * (name == "with margin"), "runs": runs, "mean": mean, "std": std}
+        return variants
+
+    main_cell = rough_variants([0.25, 0.125, 0.0], [0.125, 0.0, 0.0], shift=-0.5)
+    slow_cell = rough_variants([0.0, 0.125, 0.0], [0.0, 0.125, 0.0], shift=-0.2)
+    statistics = {k: asdict(d) for k, d in compare_variants(main_cell).items()}
+    report = {
+        "settings": {"eval_episodes": 8, "forward_velocity": 0.75},
+        "variants": main_cell,
+        "statistics": statistics,
+        "grid": [
+            {
+                "condition": "nominal",
+                "forward_velocity": 0.5,
+                "variants": slow_cell,
+                "statistics": {k: asdict(d) for k, d in compare_variants(slow_cell).items()},
+            }
+        ],
+    }
+    slow, main = module.rough_rows("0.75", module.as_report(report))  # commands ascending
+    assert slow.startswith("| 0.75 | 0.5 | 3 | 1 / 24 → 0 / 24 | 1 / 0 / 0 / 0 → 0 / 0 / 0 / 0 |")
+    assert main.startswith("| 0.75 | 0.75 | 3 | 3 / 24 → 0 / 24 | 1 / 0 / 2 / 0 → 0 / 0 / 0 / 0 |")
+    p_value = statistics["lin_acc_rms"]["p_value"]
+    assert f"(−50 %, **p {'< 0.001' if p_value < 0.001 else f'= {p_value:.2g}'}**)" in main
+    for cell in (main_cell, *(c["variants"] for c in report["grid"])):  # a report made before the terrain columns
+        for variant in cell.values():
+            variant["mean"] = {k: v for k, v in variant["mean"].items() if k in SUMMARY_METRICS}
+    with pytest.raises(ValueError, match="not evaluated on rough ground"):
+        module.rough_rows("0.75", module.as_report(report))

@@ -30,6 +30,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks
 
@@ -39,7 +40,7 @@ from benchmarks.harness import run_policies
 from margin_rl import load_robot
 from margin_rl.envs.core import AnymalCore
 from margin_rl.envs.terrain import MIN_SLOPE_DEG, TerrainConfig, at_difficulty
-from margin_rl.stability import LearnedMargin
+from margin_rl.stability import LAMBDA_SLICES, LearnedMargin
 from margin_rl.stability.analytic.extended import extended_margin_batch
 from margin_rl.train.artifacts.bundle import load_bundle
 from margin_rl.train.artifacts.policies import load_policy
@@ -81,11 +82,19 @@ def analytic_targets(robot: str, lam: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return lam[ok], target[ok]
 
 
-def compare(lam: np.ndarray, target: np.ndarray, weights: LearnedMargin) -> dict[str, float]:
+LARGEST = 3
+"""How many of the largest errors the tail statistics set aside and describe."""
+
+
+def compare(lam: np.ndarray, target: np.ndarray, weights: LearnedMargin) -> dict[str, Any]:
     """The learned margin against m_x on ``lam``: RMSE, bias, sign agreement, the share outside the training
-    ranges."""
-    learned = np.asarray(weights(lam))
+    ranges, and the tail: median and 95th percentile of |error|, the RMSE without the :data:`LARGEST` largest
+    errors, and those states (m_x, the network, the CoM acceleration in the heading frame [m/s²], the contacts)."""
+    learned = np.asarray(weights(lam), dtype=float)
     error = learned - target
+    magnitude = np.abs(error)
+    order = np.argsort(magnitude)
+    rest = error[order[:-LARGEST]] if len(error) > LARGEST else error[:0]
     return {
         "states": len(lam),
         "rmse_m": float(np.sqrt(np.mean(error**2))),
@@ -93,6 +102,18 @@ def compare(lam: np.ndarray, target: np.ndarray, weights: LearnedMargin) -> dict
         "sign_agreement": float(np.mean(np.sign(learned) == np.sign(target))),
         "out_of_distribution": float(np.mean(weights.out_of_distribution(lam))),
         "analytic_mean_m": float(np.mean(target)),
+        "median_abs_error_m": float(np.median(magnitude)),
+        "p95_abs_error_m": float(np.percentile(magnitude, 95)),
+        f"rmse_without_largest_{LARGEST}_m": float(np.sqrt(np.mean(rest**2))) if rest.size else None,
+        "largest": [
+            {
+                "analytic_m": float(target[i]),
+                "learned_m": float(learned[i]),
+                "com_acc": [float(v) for v in lam[i, LAMBDA_SLICES["com_acc"]]],
+                "contacts": int(np.sum(lam[i, LAMBDA_SLICES["contacts"]] > 0.5)),
+            }
+            for i in order[::-1][:LARGEST]
+        ],
     }
 
 
@@ -161,15 +182,19 @@ def main() -> int:
         print(f"{len(lam):,} states: {args.record}")
         return 0
     print(f"\n{args.robot}, learned margins against m_x (seed {args.seed}; policies {', '.join(policies)})\n")
-    print("| network | level (Fig. 8 = 1) | states | RMSE [cm] | bias [cm] | sign | outside training ranges |")
-    print("|---|---|---|---|---|---|---|")
+    print(
+        "| network | level (Fig. 8 = 1) | states | RMSE [cm] | bias [cm] | sign | outside training ranges "
+        f"| median / 95th pct. of abs. error [cm] | RMSE without the {LARGEST} largest [cm] |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
     for name, network in networks.items():
         for r in rows:
             n = r["networks"][name]
             print(
                 f"| {name} ({str(network.card.get('sha256'))[:8]}) | {r['level']:g} | {n['states']:,} "
                 f"| {100 * n['rmse_m']:.1f} | {100 * n['bias_m']:+.1f} | {n['sign_agreement']:.1%} "
-                f"| {n['out_of_distribution']:.1%} |"
+                f"| {n['out_of_distribution']:.1%} | {100 * n['median_abs_error_m']:.1f} / "
+                f"{100 * n['p95_abs_error_m']:.1f} | {_cm(n[f'rmse_without_largest_{LARGEST}_m'])} |"
             )
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -185,6 +210,10 @@ def main() -> int:
         }
         args.json.write_text(json.dumps(record, indent=2) + "\n")
     return 0
+
+
+def _cm(value: float | None) -> str:
+    return "n/a" if value is None else f"{100 * value:.1f}"
 
 
 if __name__ == "__main__":

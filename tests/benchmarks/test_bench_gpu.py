@@ -59,3 +59,13 @@ def test_the_rough_recipes_environment_runs_its_stages_on_warps_cpu_device(tmp_p
     record = json.loads((tmp_path / bench_gpu.JSON_NAME).read_text())
     assert record["settings"]["env_id"] == "margin_rl/AnymalC-Rough-v1" and record["settings"]["recipe"] == "rough"
     assert list(record["stages"]) == ["physics_and_env"] and record["stages"]["physics_and_env"]["complete"]
+
+
+def test_the_core_profile_counts_the_operations_of_a_step(capsys) -> None:
+    from benchmarks.speed import profile_core_ops
+
+    assert profile_core_ops.main(["--num-envs", "2", "--steps", "2", "--top", "3"]) == 0
+    out = capsys.readouterr().out
+    summary, rows = out.splitlines()[0], [line for line in out.splitlines() if line.startswith("| `aten::")]
+    assert "environments on Warp's CPU device, per step:" in summary and summary.endswith("aten calls")
+    assert len(rows) == 3 and int(summary.split("; ")[-1].split()[0].replace(",", "")) > 100

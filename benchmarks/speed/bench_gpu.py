@@ -19,12 +19,13 @@ what it measured):
    margin's torch form, rewards, terminations, observations, resets), with the learned margin and with
    ``margin="none"``, the same actions; env-steps/s and the ratio to stage 1.
 3. ``ppo``: rsl-rl PPO end to end (``make_rsl_env(..., physics="warp")``, ``OnPolicyRunner.learn``: rollouts and
-   updates, the learner on the same device), the robust recipe's PPO settings; env-steps/s.
-4. ``training``: the robust recipe on ANYmal C, both variants (margin weight 0 and the recipe's), ``--train-envs``
-   environments for ``--train-steps`` steps each through ``margin_rl.train``'s own ``train`` (checkpoints, the
-   run directory), then every checkpoint evaluated after training with the standard protocol of
-   ``benchmarks/studies/bench_learning_speed.py`` (deterministic 20 s episodes at 0.75 m/s from evaluation seed
-   1000 on ``mujoco.batch``): the time to the walking target (error <= 0.15 m/s, < 5 % falls) and to the end.
+   updates, the learner on the same device), the recipe's PPO settings; env-steps/s.
+4. ``training``: the recipe on the environment (default: robust, ANYmal C), both variants (margin weight 0 and
+   the recipe's), ``--train-envs`` environments for ``--train-steps`` steps each through ``margin_rl.train``'s own
+   ``train`` (checkpoints, the run directory), then every checkpoint evaluated after training with the standard
+   protocol of ``benchmarks/studies/bench_learning_speed.py`` (deterministic 20 s episodes at 0.75 m/s from
+   evaluation seed 1000 on ``mujoco.batch``): the time to the walking target (error <= 0.15 m/s, < 5 % falls)
+   and to the end.
 
 Medians over ``--rounds`` interleaved rounds for stages 1 and 2 (round r measures every configuration once). On a
 GPU every timing waits for the device (``torch.cuda.synchronize``) before the clock is read.
@@ -209,7 +210,7 @@ def ppo(
     env_id: str = ROBOT_ID,
     recipe: str = RECIPE,
 ) -> dict[str, Any]:
-    """Stage 3: rsl-rl PPO end to end with the robust recipe's settings on the learner's device (``partial`` as
+    """Stage 3: rsl-rl PPO end to end with the recipe's settings on the learner's device (``partial`` as
     in :func:`physics_and_env`)."""
     from rsl_rl.runners import OnPolicyRunner
 
@@ -242,7 +243,7 @@ def ppo(
 def training(
     args: argparse.Namespace, settings: dict[str, Any], partial: Callable[[dict[str, Any]], None]
 ) -> dict[str, Any]:
-    """Stage 4: both variants of the robust recipe, each trained then evaluated checkpoint by checkpoint
+    """Stage 4: both variants of the recipe, each trained then evaluated checkpoint by checkpoint
     (``partial`` as in :func:`physics_and_env`, after each variant)."""
     from benchmarks.studies.bench_learning_speed import FALL_FRACTION_TARGET, VELOCITY_ERROR_TARGET
     from margin_rl.train.commands.evaluate import evaluate

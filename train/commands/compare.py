@@ -34,8 +34,9 @@ measured for the baseline too. Outputs in ``<out>``:
 ``--eval-commands 0.5 1.0 --eval-conditions friction_0.4 mass_-20 mass_+20`` also evaluates every policy in each
 (condition, command) cell of the grid (conditions of :mod:`margin_rl.train.analysis.conditions`; the main cell is
 the nominal condition at ``--forward-velocity``), with the same episodes and seeds: ``"grid"`` in the JSON (each
-cell's variants and statistics, as for the main cell) and a table with one row per cell in the Markdown. A grid cell
-evaluated before for the same request (policy checksum, options, episodes, seeds: ``request.json``) is reused.
+cell's variants and statistics, as for the main cell) and a table with one row per cell in the Markdown. An
+evaluation made before for the same request (policy checksum, options, episodes, seeds: ``request.json``) is
+reused: every grid cell, and in the main cell every policy but each variant's first (the plot shows its episode).
 
 ``--runs RUN_DIR ...`` trains nothing and evaluates finished runs (margin weight 0 and one other weight, e.g. runs
 trained one by one with ``train``) exactly like its own. A bundled policy folder counts as a finished run, so a
@@ -266,8 +267,10 @@ def _evaluate_cell(
             }
             if not main:
                 eval_dir = eval_dir / cell_name(condition, command)
-                metrics = _reusable_evaluation(eval_dir, request)
-            if main or metrics is None:
+            # the main cell's plot needs one fresh episode per variant: its first policy is always evaluated
+            needs_example = main and name not in examples
+            metrics = None if needs_example else _reusable_evaluation(eval_dir, request)
+            if metrics is None:
                 metrics, evaluation = evaluate(
                     policy,
                     env_overrides=eval_env_overrides,
@@ -298,7 +301,8 @@ def _evaluate_cell(
 
 REQUEST_FILE = "request.json"
 """Beside a compare evaluation's ``metrics.json``: what was asked (policy checksum, options, episodes, seeds, cell);
-a grid cell asked again with the same request reuses its metrics, so a long grid continues where it stopped."""
+an evaluation asked again with the same request reuses its metrics, so a long comparison continues where it
+stopped (in the main cell, every policy but each variant's first, whose episode the plot shows)."""
 
 
 def _json_ready(value: Any) -> Any:

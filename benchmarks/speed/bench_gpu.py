@@ -373,9 +373,8 @@ def run_stage(record: Record, name: str, measure: Callable[[Callable[[dict[str, 
         return True
     except Exception as exc:
         so_far = record.data["stages"].get(name, {})
-        record.stage(name, {**so_far, "complete": False, "error": f"{type(exc).__name__}: {exc}"})
-        record.data["stages"][name]["traceback"] = traceback.format_exc()
-        record.write()
+        error = f"{type(exc).__name__}: {exc}"
+        record.stage(name, {**so_far, "complete": False, "error": error, "traceback": traceback.format_exc()})
         print(traceback.format_exc(), file=sys.stderr, flush=True)
         return False
 

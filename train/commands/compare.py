@@ -37,6 +37,10 @@ the nominal condition at ``--forward-velocity``), with the same episodes and see
 cell's variants and statistics, as for the main cell) and a table with one row per cell in the Markdown. An
 evaluation made before for the same request (policy checksum, options, episodes, seeds: ``request.json``) is
 reused: every grid cell, and in the main cell every policy but each variant's first (the plot shows its episode).
+A run's evaluations go into ``<run>/eval`` and ``<run>/eval_grid/<cell>``; evaluated in a changed environment
+(``--terrain-difficulty``, evaluation ``--env-option``, a bundle's margin weights) into ``eval_<digest>`` and
+``eval_grid_<digest>`` of those options, so comparisons of the same runs at several difficulties keep each other's
+evaluations and may run side by side (each run's folder: ``"eval_dir"`` in the JSON).
 
 ``--runs RUN_DIR ...`` trains nothing and evaluates finished runs (margin weight 0 and one other weight, e.g. runs
 trained one by one with ``train``) exactly like its own. A bundled policy folder counts as a finished run, so a
@@ -62,6 +66,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -202,7 +207,9 @@ def evaluate_variants(
     """Evaluate every variant's policies on the same command and seeds; write compare.png/.md/.json into ``out``.
 
     ``variants``: name -> (margin weight, [(training seed, policy file), ...]). A policy inside a run directory
-    is evaluated into ``<run>/eval``, any other (e.g. a bundled one) into ``<out>/eval/<variant>__s<seed>``.
+    is evaluated into ``<run>/eval``, any other (e.g. a bundled one) into ``<out>/eval/<variant>__s<seed>`` (with
+    ``eval_env_overrides``, ``eval_<digest>`` instead of ``eval``: :func:`eval_folder`; each run's folder is its
+    ``"eval_dir"`` in the report).
     ``env_options``: the options the runs were trained with (recorded); ``eval_env_overrides``: EnvConfig fields
     changed for the evaluation only (a bundle's own learned-margin weights). With both variants, the report's
     ``"statistics"`` holds, per table metric, "with margin" against "without margin" over the training seeds
@@ -232,6 +239,16 @@ def evaluate_variants(
     return report
 
 
+def eval_folder(kind: str, eval_env_overrides: dict[str, Any] | None) -> str:
+    """A run's evaluation folder: ``kind`` ("eval", "eval_grid") in the run's own environment, ``<kind>_<digest>``
+    (the first 8 hex digits of the overrides' JSON's SHA-256) in a changed one, e.g. a fixed terrain difficulty, so
+    that comparisons of the same runs in several environments keep (and reuse) each other's evaluations."""
+    if not eval_env_overrides:
+        return kind
+    text = json.dumps(_json_ready(dict(eval_env_overrides)), sort_keys=True)
+    return f"{kind}_{hashlib.sha256(text.encode()).hexdigest()[:8]}"
+
+
 def cell_name(condition: str, forward_velocity: float) -> str:
     """Folder of one grid cell's evaluation: ``<condition>__v<command>``."""
     return f"{condition}__v{forward_velocity:g}"
@@ -254,7 +271,7 @@ def _evaluate_cell(
         for seed, policy in policies:
             config = find_run_config(policy, levels=1)
             in_run = config is not None and (config.parent / PROGRESS_FILE).is_file()
-            folder = "eval" if main else "eval_grid"
+            folder = eval_folder("eval" if main else "eval_grid", eval_env_overrides)
             eval_dir = config.parent / folder if in_run else out / folder / f"{name.replace(' ', '_')}__s{seed}"
             request = {
                 "policy_sha256": sha256_file(policy),
@@ -286,7 +303,9 @@ def _evaluate_cell(
             summary = {k: v["mean"] for k, v in metrics["summary"].items()}
             terrain = metrics.get("env_config", {}).get("terrain", "flat")  # the same for every run of a comparison
             run_dir = str(config.parent) if in_run else None
-            runs.append({"seed": seed, "run_dir": run_dir, "policy": str(policy), "metrics": summary})
+            runs.append(
+                {"seed": seed, "run_dir": run_dir, "policy": str(policy), "eval_dir": str(eval_dir), "metrics": summary}
+            )
             if metrics.get("not_computed"):  # null in "metrics": say why (present only then)
                 runs[-1]["not_computed"] = metrics["not_computed"]
         table = {key: mean_std([r["metrics"][key] for r in runs]) for key in comparison_metrics(terrain)}

@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from margin_rl.train.artifacts.bundle import card_markdown
-from margin_rl.train.commands.compare import CompareSettings, evaluate_variants, main
+from margin_rl.train.commands.compare import CompareSettings, eval_folder, evaluate_variants, main
 from margin_rl.train.commands.evaluate import evaluate
 from margin_rl.train.metrics import SUMMARY_METRICS, TERRAIN_METRICS
 
@@ -334,20 +334,33 @@ def test_a_bundle_evaluated_on_a_fixed_terrain_is_reevaluated_there(tmp_path: Pa
 
 def test_main_cell_reuses_evaluations_made_for_the_same_request(tmp_path: Path, rsl_run: Path) -> None:
     """A comparison asked again reuses every main-cell evaluation but each variant's first (its episode is the
-    plot's), with the same numbers; a changed request (another command) evaluates again."""
+    plot's), with the same numbers; another command evaluates again; another environment evaluates into its own
+    folder and leaves the first one's evaluations as they were."""
     runs = [tmp_path / f"run_s{seed}" for seed in (0, 1)]  # one policy under two seeds' names
     for run in runs:
         shutil.copytree(rsl_run, run, ignore=shutil.ignore_patterns("eval", "eval_grid"))
     variants = {"with margin": (0.5, [(seed, run / "final_model.pt") for seed, run in enumerate(runs)])}
     settings = CompareSettings(margin_weight=0.5, seeds=(0, 1), eval_episodes=2, eval_seed=7, warmup_s=0.1)
+    second_metrics = runs[1] / "eval" / "metrics.json"
     first = evaluate_variants(variants, settings, tmp_path / "cmp")
     stamps = [(run / "eval" / "metrics.json").stat().st_mtime_ns for run in runs]
     again = evaluate_variants(variants, settings, tmp_path / "cmp")
     assert again["variants"] == first["variants"]
     after = [(run / "eval" / "metrics.json").stat().st_mtime_ns for run in runs]
     assert after[0] != stamps[0] and after[1] == stamps[1]  # the first seed ran again for the plot, not the second
+
+    shorter = {"episode_length_s": 0.3}  # another environment: its own folder, the first one untouched
+    elsewhere = evaluate_variants(variants, settings, tmp_path / "cmp_shorter", eval_env_overrides=shorter)
+    folder = Path(elsewhere["variants"]["with margin"]["runs"][1]["eval_dir"])
+    assert (
+        folder == runs[1] / eval_folder("eval", shorter) and folder.name.startswith("eval_") and len(folder.name) == 13
+    )
+    assert (folder / "metrics.json").is_file() and second_metrics.stat().st_mtime_ns == stamps[1]
+    assert first["variants"]["with margin"]["runs"][1]["eval_dir"] == str(runs[1] / "eval")
+    assert eval_folder("eval", None) == "eval" and eval_folder("eval_grid", shorter).startswith("eval_grid_")
+
     other = evaluate_variants(variants, replace(settings, forward_velocity=0.5), tmp_path / "cmp_other")
-    assert (runs[1] / "eval" / "metrics.json").stat().st_mtime_ns != stamps[1]
+    assert second_metrics.stat().st_mtime_ns != stamps[1]  # same folder, another request: evaluated again
     second_seed = [report["variants"]["with margin"]["runs"][1]["metrics"] for report in (first, other)]
     assert second_seed[0] != second_seed[1]
 

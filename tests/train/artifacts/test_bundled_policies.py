@@ -17,7 +17,9 @@ from margin_rl.train.commands.evaluate import evaluate
 SHIPPED = {
     "anymal_b": "margin_rl/AnymalB-v1",
     "anymal_c": "margin_rl/AnymalC-v1",
+    "anymal_c_rough": "margin_rl/AnymalC-Rough-v1",  # the rough recipe's perceptive policies, three seeds each
 }
+FLAT = {name: env_id for name, env_id in SHIPPED.items() if "Rough" not in env_id}
 V0_RUN = Path(__file__).resolve().parents[2] / "fixtures" / "v0_run" / "config.json"
 """The config.json of a run stored under a retired -v0 id (the first comparison's, margin seed 0): runs and bundles
 of that time must still resume and evaluate."""
@@ -92,11 +94,14 @@ def test_bundle_carries_the_learned_margin_its_policies_were_trained_with(name: 
             assert entry["learned_margin"]["sha256"] == carried.card["sha256"]
         else:
             assert len(entry["learned_margin"]["sha256"]) == 64
-    assert bundle.env_overrides() == {"margin_weights": str(bundle.margin_weights)}
+    assert bundle.env_overrides()["margin_weights"] == str(bundle.margin_weights)
+    # the rough bundle is evaluated on its card's fixed-difficulty terrain, the flat ones on their own ground
+    evaluation_terrain = {"terrain", "terrain_config"} if name not in FLAT else set()
+    assert set(bundle.env_overrides()) == {"margin_weights", *evaluation_terrain}
 
 
 @pytest.mark.parametrize("variant", ["without margin", "with margin"])
-@pytest.mark.parametrize(("name", "env_id"), sorted(SHIPPED.items()))
+@pytest.mark.parametrize(("name", "env_id"), sorted(FLAT.items()))
 def test_bundled_policy_walks_at_the_commanded_speed(name: str, env_id: str, variant: str, tmp_path) -> None:
     bundle = load_bundle(name)
     _, policies = bundle.variants()[variant]
@@ -107,3 +112,34 @@ def test_bundled_policy_walks_at_the_commanded_speed(name: str, env_id: str, var
     s = report["summary"]
     assert s["fell"]["mean"] == 0.0, f"{name}: bundled {variant} policy (seed {seed}) fell within 4 s"
     assert s["velocity_error_mean"]["mean"] < 0.15, s["velocity_error_mean"]
+
+
+def test_rough_bundle_card_is_the_three_seed_comparison_on_a_fixed_terrain() -> None:
+    """The rough bundle: the rough recipe's three seeds per variant, evaluated at difficulty 0.75 (steps 4.5-13.5 cm)
+    at 0.75 m/s and 0.5 m/s with each cell's tests, the terrain columns in its table."""
+    card = load_bundle("anymal_c_rough").card
+    assert card["settings"]["recipe"] == "rough" and len(card["policies"]) == 6
+    assert sorted(card["settings"]["seeds"]) == [0, 1, 2]
+    terrain = card["eval_env_overrides"]
+    assert terrain["terrain"] == "rough" and terrain["terrain_config"]["step_height"] == pytest.approx([0.045, 0.135])
+    assert [(cell["condition"], cell["forward_velocity"]) for cell in card["grid"]] == [("nominal", 0.5)]
+    assert {"fell", "termination/tilt", "edge_landing_fraction", "lin_acc_rms"} <= set(card["statistics"])
+
+
+@pytest.mark.parametrize("variant", ["without margin", "with margin"])
+def test_rough_bundled_policy_walks_a_mild_terrain_with_its_height_scan(variant: str, tmp_path: Path) -> None:
+    """Each variant's first rough policy, blind to nothing it was trained on (the height scan), walks 4 s of
+    difficulty-0.25 tiles at 0.5 m/s without falling."""
+    from margin_rl.envs.terrain import TerrainConfig, at_difficulty
+
+    bundle = load_bundle("anymal_c_rough")
+    seed, path = bundle.variants()[variant][1][0]
+    policy = load_policy(path)
+    assert policy.train_config is not None and policy.train_config["env_config"]["height_scan"] is True
+    overrides = {**bundle.env_overrides(), "terrain_config": at_difficulty(TerrainConfig(), 0.25)}
+    report, _ = evaluate(
+        path, env_overrides=overrides, episodes=2, seed=7, forward_velocity=0.5, max_steps=200, out_dir=tmp_path
+    )
+    s = report["summary"]
+    assert s["fell"]["mean"] == 0.0, f"rough {variant} policy (seed {seed}) fell within 4 s on difficulty 0.25"
+    assert s["velocity_error_mean"]["mean"] < 0.2, s["velocity_error_mean"]

@@ -266,12 +266,12 @@ def _evaluate_cell(
     main = cell == (DEFAULT_CONDITION, settings.forward_velocity)
     report: dict[str, Any] = {}
     examples: dict[str, Evaluation] = {}
+    folder = eval_folder("eval" if main else "eval_grid", eval_env_overrides)
     for name, (weight, policies) in variants.items():
         runs, terrain = [], "flat"
         for seed, policy in policies:
             config = find_run_config(policy, levels=1)
             in_run = config is not None and (config.parent / PROGRESS_FILE).is_file()
-            folder = eval_folder("eval" if main else "eval_grid", eval_env_overrides)
             eval_dir = config.parent / folder if in_run else out / folder / f"{name.replace(' ', '_')}__s{seed}"
             request = {
                 "policy_sha256": sha256_file(policy),

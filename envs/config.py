@@ -10,7 +10,7 @@ given for ``EnvConfig.reward_params`` becomes a :class:`RewardParams` (its keys 
 
 The reward's added weights and parameters live in one mapping, ``EnvConfig.reward_params``
 (:class:`RewardParams`: ``alive_bonus``, ``knee_clearance``, ``knee_clearance_height``, ``base_height``,
-``base_height_fraction``, ``termination_penalty``, ``yaw_tracking``, ``logistic_gain``);
+``base_height_fraction``, ``termination_penalty``, ``yaw_tracking``, ``base_acceleration``, ``logistic_gain``);
 until EnvConfig v1 (the ``-v1`` ids) they were top-level fields. Stored v0 configs are translated in one place,
 :func:`upgrade_stored_env_config` (table :data:`LEGACY_FIELDS`).
 """
@@ -218,6 +218,24 @@ REWARD_PRESETS: dict[str, dict[str, float]] = {
         "feet_air_time": 0.04,
         "collisions": -0.02,
     },
+    # The field's flat velocity task for ANYmal (legged_gym's anymal_c_flat, Isaac Lab's ANYmal-C flat velocity
+    # task): their per-second weights times the policy step of 0.02 s, exponential kernels on the commanded planar
+    # velocity and yaw rate. The margin's 0.08 per metre keeps its size against the tracking kernel's peak as in
+    # "paper" (1 m against 0.25 there; 0.08 m against 0.02 here), so a margin weight means the same in both. Where
+    # the two codebases differ and why (docs/rl.md "The field's reward").
+    "field": {
+        "tracking_lin_vel_xy": 1.0 * 0.02,
+        "tracking_ang_vel_z": 0.5 * 0.02,
+        "margin": 4.0 * 0.02,
+        "vertical_velocity": -2.0 * 0.02,
+        "roll_pitch_rate": -0.05 * 0.02,
+        "orientation": -5.0 * 0.02,
+        "torques": -2.5e-5 * 0.02,
+        "joint_acceleration": -2.5e-7 * 0.02,
+        "action_rate": -0.01 * 0.02,
+        "feet_air_time": 0.5 * 0.02,
+        "collisions": -1.0 * 0.02,
+    },
 }
 """Reward weights per preset; every term is defined in :mod:`margin_rl.envs.rewards`. The ``margin``
 entry is multiplied by :attr:`EnvConfig.margin_weight`."""
@@ -326,6 +344,10 @@ class RewardParams(Mapping):
     # point, a policy walking in circles is demoted however well it walks. The comparison gives both variants the
     # same term.
     yaw_tracking: float = 0.0
+    # Penalty per (m/s^2)^2 of base linear acceleration, |a|^2 (term "base_acceleration", 0: off), added to any
+    # preset: a plain smoothness penalty on what the margin is found to lower, the control that asks whether the
+    # margin does anything a penalty of equal smoothing does not (docs/studies/field_reward.md).
+    base_acceleration: float = 0.0
     logistic_gain: float = 8.0  # L(gain * (v_cmd - v)) of seed 000 §V-C
 
     def __post_init__(self) -> None:
@@ -350,6 +372,12 @@ class RewardParams(Mapping):
         )
         check_number(
             f"{where}.termination_penalty", self.termination_penalty, minimum=0.0, hint="penalty per fall, 0: off"
+        )
+        check_number(
+            f"{where}.base_acceleration",
+            self.base_acceleration,
+            minimum=0.0,
+            hint="penalty per (m/s^2)^2 of base linear acceleration, 0: off",
         )
         check_number(
             f"{where}.yaw_tracking",
@@ -518,6 +546,8 @@ class EnvConfig:
             weights["termination"] = weights.get("termination", 0.0) - params.termination_penalty
         if params.yaw_tracking:
             weights["yaw_tracking"] = weights.get("yaw_tracking", 0.0) + params.yaw_tracking
+        if params.base_acceleration:
+            weights["base_acceleration"] = weights.get("base_acceleration", 0.0) - params.base_acceleration
         return weights
 
 

@@ -466,6 +466,8 @@ class AnymalCore:
         if "knee_clearance" in weights:  # a terrain lookup per knee: only when the term is on
             values["knee_heights"] = state.knees[..., 2] - self.terrain.height(state.knees[..., :2])
             values["knee_clearance_height"] = self._full(cfg.reward_params.knee_clearance_height)
+        if "base_acceleration" in weights:  # the comparison's metric: unfiltered, its norm frame-free
+            values["base_lin_acc"] = acc.com_measured
         if "base_height" in weights:
             values["base_height_target"] = self._full(
                 cfg.reward_params.base_height_fraction * self.robot.standing_height

@@ -39,6 +39,33 @@ def yaw_tracking(s: Arrays, gain: float) -> Any:
     return logistic_kernel(gain * (s["command"][:, 2] - s["base_ang_vel"][:, 2]))
 
 
+def _row_sum(x: Any) -> Any:
+    """Sum over the second axis (N, k) -> (N,)."""
+    return namespace(x).sum(x, axis=1)
+
+
+FIELD_TRACKING_VARIANCE = 0.25
+"""sigma^2 [(m/s)^2, (rad/s)^2] of the field's exponential tracking kernels exp(-e^2 / sigma^2): legged_gym's
+``tracking_sigma`` and Isaac Lab's ``std = sqrt(0.25)`` of its flat and rough velocity tasks."""
+
+
+def exponential_kernel(squared_error: Any) -> Any:
+    """exp(-e^2 / sigma^2), in (0, 1], 1 at e = 0 (sigma^2 = :data:`FIELD_TRACKING_VARIANCE`)."""
+    return namespace(squared_error).exp(-squared_error / FIELD_TRACKING_VARIANCE)
+
+
+def tracking_lin_vel_xy(s: Arrays, gain: float) -> Any:
+    """exp(-|v_cmd,xy - v_xy|^2 / sigma^2): the field's linear-velocity tracking kernel on the commanded heading and
+    lateral velocity [m/s] in the base frame (legged_gym ``tracking_lin_vel``, Isaac Lab ``track_lin_vel_xy_exp``)."""
+    return exponential_kernel(_row_sum((s["command"][:, :2] - s["base_lin_vel"][:, :2]) ** 2))
+
+
+def tracking_ang_vel_z(s: Arrays, gain: float) -> Any:
+    """exp(-(omega_cmd - omega_z)^2 / sigma^2): the field's yaw-rate tracking kernel [rad/s] about the base z axis
+    (legged_gym ``tracking_ang_vel``, Isaac Lab ``track_ang_vel_z_exp``)."""
+    return exponential_kernel((s["command"][:, 2] - s["base_ang_vel"][:, 2]) ** 2)
+
+
 def margin(s: Arrays, gain: float) -> Any:
     """The stability margin m(lambda) [m] (learned, analytic or zero)."""
     return s["margin"]
@@ -62,11 +89,6 @@ def yaw_rate(s: Arrays, gain: float) -> Any:
 
 def vertical_velocity(s: Arrays, gain: float) -> Any:
     return s["base_lin_vel"][:, 2] ** 2
-
-
-def _row_sum(x: Any) -> Any:
-    """Sum over the second axis (N, k) -> (N,)."""
-    return namespace(x).sum(x, axis=1)
 
 
 def roll_pitch_rate(s: Arrays, gain: float) -> Any:
@@ -94,6 +116,12 @@ def feet_air_time(s: Arrays, gain: float) -> Any:
     xp = namespace(s["command"])
     moving = xp.linalg.vector_norm(s["command"][:, :2], axis=1) > 0.1
     return _row_sum((s["air_time_at_touchdown"] - 0.5) * s["touchdown"]) * moving
+
+
+def base_acceleration(s: Arrays, gain: float) -> Any:
+    """|a|^2 [(m/s^2)^2]: the squared norm of the base (CoM) linear acceleration over the policy step, unfiltered,
+    the quantity the comparison's ``lin_acc_rms`` averages (a plain smoothness penalty, the margin's control)."""
+    return _row_sum(s["base_lin_acc"] ** 2)
 
 
 def collisions(s: Arrays, gain: float) -> Any:
@@ -129,6 +157,8 @@ REWARD_TERMS: dict[str, Callable[[Arrays, float], Any]] = {
     for f in (
         velocity_tracking,
         yaw_tracking,
+        tracking_lin_vel_xy,
+        tracking_ang_vel_z,
         margin,
         alive,
         lateral_velocity,
@@ -139,6 +169,7 @@ REWARD_TERMS: dict[str, Callable[[Arrays, float], Any]] = {
         torques,
         action_rate,
         joint_acceleration,
+        base_acceleration,
         feet_air_time,
         collisions,
         knee_clearance,

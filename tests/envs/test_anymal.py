@@ -492,6 +492,34 @@ def test_knee_clearance_term_matches_the_shank_bodies_in_mujoco(toy_weights: str
         np.testing.assert_allclose(out.info["reward_knee_clearance"][env], expected, rtol=0, atol=1e-9)
 
 
+def _base_subtree_velocity(core: AnymalCore, env: int) -> np.ndarray:
+    """The robot's CoM velocity [m/s] (the base body's subtree) from an independent mj_forward of ``env``'s state."""
+    data = core.render_data(env)
+    return data.subtree_linvel[mujoco.mj_name2id(core.physics.model, mujoco.mjtObj.mjOBJ_BODY, "base")].copy()
+
+
+def test_base_acceleration_term_is_the_metrics_acceleration(toy_weights: str) -> None:
+    """The control's penalty is -K |a|^2 of the unfiltered CoM acceleration the comparison's lin_acc_rms averages
+    (reported in the base frame: the norm is the same), and that acceleration is the finite difference of MuJoCo's
+    subtree CoM velocity over the policy step, read independently; off by default."""
+    config = EnvConfig(robot="anymal_b", margin_weights=toy_weights, randomization=NO_NOISE)
+    off = AnymalCore(config, 1, seed=0)
+    off.reset()
+    assert "reward_base_acceleration" not in off.step(np.zeros((1, 12))).info
+    core = AnymalCore(config.replace(reward_params={"base_acceleration": 0.01}), 2, 0)
+    core.reset()
+    actions = np.random.default_rng(0).uniform(-1, 1, (2, 12))
+    for _ in range(3):
+        before = [_base_subtree_velocity(core, env) for env in range(2)]
+        out = core.step(actions)
+    after = [_base_subtree_velocity(core, env) for env in range(2)]
+    for env in range(2):
+        acc = (after[env] - before[env]) / core.dt
+        assert np.linalg.norm(acc) > 0.1  # a moving robot, not a vacuous zero
+        np.testing.assert_allclose(out.info["base_lin_acc"][env] @ out.info["base_lin_acc"][env], acc @ acc, rtol=1e-6)
+        np.testing.assert_allclose(out.info["reward_base_acceleration"][env], -0.01 * (acc @ acc), rtol=1e-6)
+
+
 def test_base_height_term_matches_the_base_body_in_mujoco(toy_weights: str) -> None:
     """The term is max(0, f h_standing - z_base), h_standing read from the MJCF's standing keyframe independently
     of the environment (model.key_qpos) and z_base from an independent mj_forward of the same state; the step's

@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from margin_rl.envs.config import TerminationConfig
-from margin_rl.envs.rewards import REWARD_TERMS, compute_rewards, logistic_kernel
+from margin_rl.envs.rewards import FIELD_TRACKING_VARIANCE, REWARD_TERMS, compute_rewards, logistic_kernel
 from margin_rl.envs.stability_input import heading_rotation, lambda_from_simulation, stance_width
 from margin_rl.envs.terminations import CAUSE_NAMES, any_cause, termination_causes
 from margin_rl.robot import quat_wxyz_to_matrix
@@ -33,6 +33,7 @@ def reward_inputs(rng: np.random.Generator, n: int = N) -> dict[str, np.ndarray]
         "action": rng.uniform(-1, 1, (n, 12)),
         "last_action": rng.uniform(-1, 1, (n, 12)),
         "joint_acc": rng.normal(0, 50, (n, 12)),
+        "base_lin_acc": rng.normal(0, 5, (n, 3)),
         "touchdown": rng.random((n, 4)) < 0.3,
         "air_time_at_touchdown": rng.uniform(0, 1, (n, 4)),
         "thigh_contacts": rng.random((n, 4)) < 0.2,
@@ -71,6 +72,21 @@ def test_the_terms_hold_their_hand_computed_values() -> None:
         assert float(REWARD_TERMS["knee_clearance"](knees, 1.0)[0]) == pytest.approx(0.05 + 0.1)
         base = {"base_height": xp_array([0.40, 0.50]), "base_height_target": xp_array([0.45, 0.45])}
         np.testing.assert_allclose(np.asarray(REWARD_TERMS["base_height"](base, 1.0)), [0.05, 0.0], atol=1e-15)
+        # the field's kernels: 1 on the command, e^-1 one sigma away (0.5 m/s or rad/s), split over x and y alike
+        sigma = FIELD_TRACKING_VARIANCE**0.5
+        moving = {
+            "command": xp_array([[0.5, 0.0, 0.2], [0.5, 0.0, 0.2], [0.5, 0.0, 0.2]]),
+            "base_lin_vel": xp_array([[0.5, 0.0, 9.0], [0.5 - sigma, 0.0, 0.0], [0.5 - 0.3, 0.4, 0.0]]),
+            "base_ang_vel": xp_array([[7.0, 7.0, 0.2], [0.0, 0.0, 0.2 + sigma], [0.0, 0.0, 0.2 - 2 * sigma]]),
+        }
+        np.testing.assert_allclose(
+            np.asarray(REWARD_TERMS["tracking_lin_vel_xy"](moving, 1.0)), [1.0, np.exp(-1), np.exp(-1)], rtol=1e-12
+        )
+        np.testing.assert_allclose(
+            np.asarray(REWARD_TERMS["tracking_ang_vel_z"](moving, 1.0)), [1.0, np.exp(-1), np.exp(-4)], rtol=1e-12
+        )
+        accelerations = {"base_lin_acc": xp_array([[3.0, 4.0, 0.0], [0.0, 0.0, -2.0]])}
+        np.testing.assert_allclose(np.asarray(REWARD_TERMS["base_acceleration"](accelerations, 1.0)), [25.0, 4.0])
 
 
 def test_no_reward_term_on_an_empty_weighting_gives_zeros_of_the_inputs_kind() -> None:

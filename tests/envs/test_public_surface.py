@@ -26,7 +26,14 @@ from hypothesis import strategies as st
 import margin_rl  # noqa: F401 - registers the ids
 from margin_rl.envs import anymal as anymal_module
 from margin_rl.envs.anymal import AnymalEnv
-from margin_rl.envs.config import CommandConfig, EnvConfig, RandomizationConfig, RewardParams, TerminationConfig
+from margin_rl.envs.config import (
+    REWARD_PRESETS,
+    CommandConfig,
+    EnvConfig,
+    RandomizationConfig,
+    RewardParams,
+    TerminationConfig,
+)
 from margin_rl.envs.margin_kinds import MARGIN_KINDS
 from margin_rl.envs.terrain import TerrainConfig
 from margin_rl.envs.vector import AnymalVectorEnv
@@ -115,7 +122,7 @@ def test_bad_margin_weight_is_refused_at_make(value: object, error: type, messag
             TypeError,
             r"EnvConfig.reward_params: unknown key\(s\) \['alive_bonsu'\]; the known keys are alive_bonus, "
             r"knee_clearance, knee_clearance_height, base_height, base_height_fraction, termination_penalty, "
-            r"yaw_tracking, logistic_gain",
+            r"yaw_tracking, base_acceleration, logistic_gain",
         ),
         (
             lambda: EnvConfig(reward_params=0.1),
@@ -353,7 +360,7 @@ def test_fuzz_reward_params_mapping(params: dict[str, object]) -> None:
     reset_velocity_noise=st.floats(0, 1e300),
     push_force=st.floats(0, 1e9),
     action_scale=st.floats(1e-6, 1e3),
-    preset=st.sampled_from(["paper", "shaped"]),
+    preset=st.sampled_from(sorted(REWARD_PRESETS)),
     seed=st.integers(0, 2**32),
 )
 def test_fuzz_valid_configs_never_return_nan(

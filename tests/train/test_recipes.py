@@ -122,6 +122,42 @@ def test_rough_recipe_is_the_robust_one_on_the_curriculum_with_perception() -> N
     assert train_module.TrainSpec.from_json(rough.to_json()) == rough  # the curriculum survives config.json
 
 
+def test_field_recipe_is_the_robust_one_with_the_fields_reward() -> None:
+    from margin_rl.envs.config import REWARD_PRESETS
+
+    field, robust = _spec("--recipe", "field"), _spec("--recipe", "robust")
+    config = field.env_config
+    assert config.reward_preset == "field" and field.total_steps == robust.total_steps == 10_000_000
+    assert field.ppo == robust.ppo and field.num_envs == robust.num_envs
+    # no alive bonus; the knee term at the robust recipe's size against the tracking kernel's peak (0.02 vs 0.25)
+    assert config.reward_params.alive_bonus == 0.0
+    assert config.reward_params.knee_clearance == pytest.approx(robust.env_config.reward_params.knee_clearance * 0.08)
+    same = config.replace(reward_preset="paper", reward_params=robust.env_config.reward_params)
+    assert same == robust.env_config  # commands, randomisation, pushes, the margin weight: the robust recipe's
+    # the field's per-second weights times the 0.02 s policy step (legged_gym / Isaac Lab ANYmal C flat)
+    per_second = {
+        "tracking_lin_vel_xy": 1.0,
+        "tracking_ang_vel_z": 0.5,
+        "vertical_velocity": -2.0,
+        "roll_pitch_rate": -0.05,
+        "orientation": -5.0,
+        "torques": -2.5e-5,
+        "joint_acceleration": -2.5e-7,
+        "action_rate": -0.01,
+        "feet_air_time": 0.5,
+        "collisions": -1.0,
+    }
+    preset = REWARD_PRESETS["field"]
+    assert set(preset) == {*per_second, "margin"}
+    assert config.decimation * 0.005 == pytest.approx(0.02)  # the MJCF's 5 ms timestep, 4 per policy step
+    for name, weight in per_second.items():
+        assert preset[name] == pytest.approx(weight * 0.02, rel=1e-12), name
+    # the margin weighs against the tracking peak as in the paper's reward: w m / 0.25 there, 0.08 w m / 0.02 here
+    assert preset["margin"] / 0.02 == pytest.approx(REWARD_PRESETS["paper"]["margin"] / 0.25)
+    assert config.reward_weights["margin"] == pytest.approx(0.1 * 0.08)
+    assert train_module.TrainSpec.from_json(field.to_json()) == field
+
+
 def test_a_fixed_terrain_difficulty_sets_the_rough_tiles_at_that_scale() -> None:
     config = _spec("--terrain-difficulty", "0.5").env_config
     assert config.terrain == "rough" and config.terrain_config.curriculum_levels == 0

@@ -17,6 +17,7 @@ import argparse
 from collections.abc import Mapping
 from typing import Any
 
+from margin_rl.envs.config import REWARD_PRESETS
 from margin_rl.envs.margin_kinds import MARGIN_KINDS
 from margin_rl.envs.terrain import TerrainConfig, at_difficulty
 from margin_rl.train.config import parse_assignments
@@ -58,7 +59,7 @@ def add_env_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env", default=None, help=f"margin_rl ANYmal id (default {DEFAULT_ENV})")
     parser.add_argument("--margin", choices=tuple(MARGIN_KINDS), help="margin used by the env")
     parser.add_argument("--margin-weights", help="learned-margin weights .npz with its card (default: bundled)")
-    parser.add_argument("--reward-preset", choices=("paper", "shaped"), help="reward preset (default paper)")
+    parser.add_argument("--reward-preset", choices=tuple(REWARD_PRESETS), help="reward preset (default paper)")
     parser.add_argument(
         "--terrain-difficulty",
         type=float,

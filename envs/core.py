@@ -40,6 +40,7 @@ episode counters), so that the copy steps to the same numbers as the original.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import mujoco
@@ -67,7 +68,14 @@ from margin_rl.envs.stability_input import (
     stability_state_from_simulation,
     stance_width,
 )
-from margin_rl.envs.step_data import Accelerations, SimulationState, StepOutput, check_finite_outputs
+from margin_rl.envs.step_checks import StepChecks
+from margin_rl.envs.step_data import (
+    Accelerations,
+    SimulationState,
+    StepOutput,
+    check_finite_outputs,
+    finite_output_hint,
+)
 from margin_rl.envs.terminations import any_cause, info_key, termination_causes
 from margin_rl.envs.terrain import (
     STEP_EDGE_RISE,
@@ -101,10 +109,51 @@ MARGIN_CLIP: tuple[float, float] = (-0.5, 0.5)
 DIVERGED_SPEED = 1e3
 """A generalised velocity above this (m/s, rad/s) marks a simulation as diverged."""
 
+TORQUE_LIMIT_TOLERANCE = 1e-4
+"""A joint whose |torque| is within this share of its actuator's force limit counts as at the limit
+(``info["torque_at_limit"]``): 0.008 N m of ANYmal's 80 N m."""
+
 DEVICE_CHECK_STEPS = 24
-"""Policy steps between two checks of a device physics' buffers (``check_overflow``, a host read): the rollout
-length of the recipes, so once per PPO iteration. Overflows are kept on the device until then; on the host the
-check costs nothing and runs every step."""
+"""The recipes' rollout length: the cadence the rsl-rl adapter gives a core that computes on a device
+(:attr:`AnymalCore.check_every`), so one read of the step's checks per PPO iteration."""
+
+
+@dataclass(frozen=True)
+class ResetRows:
+    """The environments a reset writes, and how: given ids (their rows computed and written by index: the host's
+    resets, and any reset asked for), or a mask (every row computed, written in place where the mask holds: a
+    device step's autoreset, with no host read and the same work and random draws every step)."""
+
+    select: Any  # what reads the rows: the ids, or slice(None)
+    count: int  # rows computed (and random draws per quantity)
+    mask: Any = None  # (N,) bool where written; None: the ids
+
+    @classmethod
+    def at(cls, ids: Any) -> ResetRows:
+        return cls(ids, int(ids.shape[0]))
+
+    @classmethod
+    def where(cls, mask: Any) -> ResetRows:
+        return cls(slice(None), int(mask.shape[0]), mask)
+
+    @property
+    def physics_rows(self) -> Any:
+        """What the physics' reset takes: the ids, or the mask."""
+        return self.select if self.mask is None else self.mask
+
+    @property
+    def forward_rows(self) -> Any:
+        """What the physics' forward pass takes: the ids, or None (every simulation)."""
+        return self.select if self.mask is None else None
+
+    def write(self, target: Any, values: Any) -> None:
+        """``target[rows] = values``, in place (``values``: ``count`` rows, or a scalar)."""
+        if self.mask is None:
+            target[self.select] = values
+            return
+        xp = namespace(target)
+        mask = xp.reshape(self.mask, (self.count,) + (1,) * (target.ndim - 1))
+        target[...] = xp.where(mask, values, target)
 
 
 def check_margin_runs_on(kind: str, physics: str) -> None:
@@ -210,9 +259,16 @@ class AnymalCore:
         # step is bound by kernel launches, not by memory traffic).
         self.xp = namespace(physics.qpos)
         self.device = device_of(physics.qpos)
-        # Reading a device's buffer flags waits for it: there, once per DEVICE_CHECK_STEPS; on the host, every step.
-        self._check_every = 1 if str(self.device) == "cpu" else DEVICE_CHECK_STEPS
+        # On a device (Warp, on a GPU or on its CPU device) the step reads nothing from the host: its checks become
+        # flags read every check_every steps (envs.step_checks), its resets and random draws are by mask, of a fixed
+        # size. On the host (mujoco.batch) every check raises at once and the draws are numpy's, as they always were.
+        self.sync_free = self.xp is not np
+        self.check_every = 1
+        """Steps between two reads of a device step's checks (:meth:`raise_pending_errors`): 1 (at once) unless a
+        learner sets its rollout length; ignored on the host, where every check raises at once."""
         self._steps_since_check = 0
+        self.steps_taken = 0  # steps since the core was built, named by the checks' errors
+        self._checks = StepChecks(self.xp.zeros(num_envs, device=self.device))
         self.dt = float(physics.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
         self._base = physics.body_id(names.BASE_BODY)
@@ -228,6 +284,9 @@ class AnymalCore:
         self._key, key_qpos, key_ctrl = physics.keyframe(names.STANDING_KEYFRAME)
         self._key_qpos, self._key_ctrl = self._array(key_qpos), self._array(key_ctrl)
         self._standing_joint_pos = self._array(self.robot.standing_joint_pos)
+        # |tau| within this share of the MJCF forcerange counts as at the limit (MuJoCo clips to it exactly; Warp's
+        # float32 rounds within ~1e-7 of it)
+        self._torque_at_limit = self._array((1.0 - TORQUE_LIMIT_TOLERANCE) * self.robot.torque_limits)
         self._floor = physics.geom_id(names.FLOOR_GEOM)
         self._friction = physics.per_env_field("geom_friction")
         self.mu = self.xp.full(num_envs, physics.geom_friction(self._floor), dtype=self.xp.float64, device=self.device)
@@ -310,61 +369,58 @@ class AnymalCore:
         """
         if seed is not None:
             self.rng = random_generator(seed, self.physics.qpos)
-        xp = self.xp
-        ids = xp.arange(self.num_envs, device=self.device) if ids is None else self._index(ids)
-        n = int(ids.shape[0])
-        if n == 0:
+        ids = self.xp.arange(self.num_envs, device=self.device) if ids is None else self._index(ids)
+        if int(ids.shape[0]) == 0:
             return
+        self._reset_rows(ResetRows.at(ids))
+
+    def _reset_rows(self, rows: ResetRows) -> None:
+        """Reset the environments of ``rows`` (:class:`ResetRows`: given ids, or a mask over every environment) to a
+        randomised standing state and new commands; the random draws are one per row of ``rows``."""
+        xp = self.xp
+        n = rows.count
         cfg, rnd, rng, physics = self.config, self.config.randomization, self.rng, self.physics
         if self.terrain.levels:
-            self._move_between_levels(ids)
-        physics.reset(ids, self._key)
+            self._move_between_levels(rows)
+        physics.reset(rows.physics_rows, self._key)
         qpos = xp.asarray(xp.broadcast_to(self._key_qpos, (n, self._key_qpos.shape[0])), copy=True)
         spawn_points = self.terrain.spawn_points_like(qpos)
         if self.terrain.levels:  # a tile of the environment's level, at random along its row
             columns = spawn_points.shape[0] // self.terrain.levels
-            spawn = spawn_points[self.terrain_level[ids] * columns + self._index(rng.integers(0, columns, size=n))]
+            tile = self.terrain_level[rows.select] * columns + self._index(rng.integers(0, columns, size=n))
+            spawn = spawn_points[tile]
         else:
             spawn = spawn_points[rng.integers(0, spawn_points.shape[0], size=n)]
-        self._spawn_xy[ids] = spawn[:, :2]
+        rows.write(self._spawn_xy, spawn[:, :2])
         base_pos = qpos[:, names.BASE_POSITION_QPOS]  # a view: writes go to qpos
         base_pos[:, :2] = spawn[:, :2]
         base_pos[:, 2] = spawn[:, 2] + self._key_qpos[names.BASE_POSITION_QPOS][2] + 0.02  # 2 cm above the ground
         qpos[:, names.JOINT_QPOS] += rng.uniform(-1, 1, size=(n, 12)) * rnd.reset_joint_noise
         qvel = xp.zeros((n, physics.nv), dtype=xp.float64, device=self.device)
         qvel[:, names.BASE_QVEL] = rng.uniform(-1, 1, size=(n, 6)) * rnd.reset_velocity_noise
-        physics.qpos[ids] = self._cast(qpos, physics.qpos)
-        physics.qvel[ids] = self._cast(qvel, physics.qvel)
-        physics.ctrl[ids] = self._cast(self._key_ctrl, physics.ctrl)
-        physics.xfrc_applied[ids] = 0.0
+        rows.write(physics.qpos, self._cast(qpos, physics.qpos))
+        rows.write(physics.qvel, self._cast(qvel, physics.qvel))
+        rows.write(physics.ctrl, self._cast(self._key_ctrl, physics.ctrl))
+        rows.write(physics.xfrc_applied, 0.0)
         if rnd.friction is not None:
-            self.mu[ids] = rng.uniform(*rnd.friction, size=n)
-            self._friction[ids, self._floor, 0] = self._cast(self.mu[ids], self._friction)
-        physics.forward(ids)
+            rows.write(self.mu, rng.uniform(*rnd.friction, size=n))
+            rows.write(self._friction[:, self._floor, 0], self._cast(self.mu[rows.select], self._friction))
+        physics.forward(rows.forward_rows)
         c = cfg.command
-        self.command[ids] = xp.stack(
-            [
-                rng.uniform(*c.forward_velocity, n),
-                rng.uniform(*c.lateral_velocity, n),
-                rng.uniform(*c.yaw_rate, n),
-            ],
-            axis=1,
-        )
-        self.last_action[ids] = 0.0
-        self.episode_step[ids] = 0
-        state = self._read(ids)
-        self._prev_com_vel[ids] = state.com_vel
-        self._prev_ang_vel[ids] = state.ang_vel_world
-        self._prev_joint_vel[ids] = state.joint_vel
-        self._com_acc[ids] = 0.0
-        self._ang_acc[ids] = 0.0
-        self._air_time[ids] = 0.0
-        self._prev_contacts[ids] = True
-        self._push_steps_left[ids] = 0
-        self._push_force[ids] = 0.0
-        self._push_applied[ids] = 0.0
+        velocities = (c.forward_velocity, c.lateral_velocity, c.yaw_rate)
+        rows.write(self.command, xp.stack([rng.uniform(*bounds, n) for bounds in velocities], axis=1))
+        rows.write(self.last_action, 0.0)
+        rows.write(self.episode_step, 0)
+        state = self._read(rows.select)
+        rows.write(self._prev_com_vel, state.com_vel)
+        rows.write(self._prev_ang_vel, state.ang_vel_world)
+        rows.write(self._prev_joint_vel, state.joint_vel)
+        for buffer in (self._com_acc, self._ang_acc, self._air_time, self._push_force, self._push_applied):
+            rows.write(buffer, 0.0)
+        rows.write(self._prev_contacts, True)
+        rows.write(self._push_steps_left, 0)
         if rnd.push_interval_s is not None:
-            self._next_push[ids] = rng.exponential(rnd.push_interval_s / self.dt, size=n)
+            rows.write(self._next_push, rng.exponential(rnd.push_interval_s / self.dt, size=n))
 
     def restart_on_levels(self, levels: Any) -> None:
         """Start every environment afresh on the terrain curriculum's row ``levels[i]`` (a resumed training's
@@ -395,20 +451,20 @@ class AnymalCore:
         self.episode_step[:] = 0  # no episode to judge: every environment keeps the row it is given
         self.reset()
 
-    def _move_between_levels(self, ids: Any) -> None:
-        """The terrain curriculum's step at the end of the episodes of ``ids`` (:func:`~margin_rl.envs.terrain.
+    def _move_between_levels(self, rows: ResetRows) -> None:
+        """The terrain curriculum's step at the end of the episodes of ``rows`` (:func:`~margin_rl.envs.terrain.
         next_levels`), before they are reset; environments that have not stepped since their last reset keep
         their level."""
-        xp, levels = self.xp, self.terrain.levels
+        xp, levels, ids = self.xp, self.terrain.levels, rows.select
         ran = self.episode_step[ids] > 0
         where = self._float(self.physics.qpos[ids][:, names.BASE_POSITION_QPOS][:, :2])
         walked = xp.linalg.vector_norm(where - self._spawn_xy[ids], axis=1)
         commanded = xp.linalg.vector_norm(self.command[ids, :2], axis=1) * self.episode_step[ids] * self.dt
-        random_level = self._index(self.rng.integers(0, levels, size=int(ids.shape[0])))
+        random_level = self._index(self.rng.integers(0, levels, size=rows.count))
         moved = next_levels(
             self.terrain_level[ids], walked, commanded, self.config.terrain_config.tile, levels - 1, random_level
         )
-        self.terrain_level[ids] = xp.where(ran, moved, self.terrain_level[ids])
+        rows.write(self.terrain_level, xp.where(ran, moved, self.terrain_level[ids]))
 
     # ------------------------------------------------------------------ state
     def _read(self, ids: Any = slice(None)) -> SimulationState:
@@ -445,7 +501,7 @@ class AnymalCore:
         self.episode_step += 1
         state = self._measure(diverged)
         acc = self._estimate_accelerations(state)
-        stability, margin = self._stability(state, acc)
+        stability, margin, lam = self._stability(state, acc)
         touchdown, air_at_touchdown = self._track_air_time(state.contacts)
         edge_touchdown = self._edge_touchdowns(state.feet, touchdown)
         base_height = state.base_pos[:, 2] - self.terrain.height(state.base_pos[:, :2])
@@ -476,19 +532,38 @@ class AnymalCore:
         terminated = any_cause(causes)
         values["fell"] = terminated & ~diverged  # a diverged simulation is the simulator's failure, not the policy's
         reward, terms = compute_rewards(weights, values, cfg.reward_params.logistic_gain)
-        self.last_action = self.xp.asarray(action, copy=True)
+        self.last_action[...] = action
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
-        info = self._info(state, acc, values, terms, margin, stability, diverged, causes)
+        info = self._info(state, acc, values, terms, margin, lam, stability, diverged, causes)
         observation = self._observe(values)
         final_observation = self.xp.asarray(observation, copy=True)
         done = terminated | truncated
-        if self.autoreset and bool(self.xp.any(done)):
+        if self.autoreset and self.sync_free:  # every row reset where done, observed again where done
+            self._reset_rows(ResetRows.where(done))
+            observation = self.xp.where(done[:, None], self._observe_ids(slice(None)), observation)
+        elif self.autoreset and bool(self.xp.any(done)):
             ids = self.xp.nonzero(done)[0]
             self.reset(ids)
             observation[ids] = self._observe_ids(ids)
         privileged = self.privileged_observation() if cfg.privileged_observations else None
-        check_finite_outputs(cfg, reward, observation, final_observation)
+        self.steps_taken += 1
+        if self.sync_free:
+            self._record_output_checks(reward, observation, final_observation)
+        else:
+            check_finite_outputs(cfg, reward, observation, final_observation)
         return StepOutput(observation, reward, terminated, truncated, info, final_observation, privileged)
+
+    def _record_output_checks(self, reward: Any, *observations: Any) -> None:
+        """A device step's output checks as flags, read every :attr:`check_every` steps."""
+        xp, step = self.xp, self.steps_taken - 1
+        self._checks.record("reward", ~xp.isfinite(reward), step)
+        bad = xp.zeros(self.num_envs, dtype=xp.bool, device=self.device)
+        for observation in observations:
+            bad = bad | ~xp.all(xp.isfinite(observation), axis=1)
+        self._checks.record("observation", bad, step)
+        self._steps_since_check += 1
+        if self._steps_since_check >= self.check_every:
+            self.raise_pending_errors()
 
     def _full(self, value: float) -> Any:
         """(N,) float64 of ``value``."""
@@ -501,7 +576,11 @@ class AnymalCore:
         a = self._array(actions, xp.float64)
         if tuple(a.shape) != (self.num_envs, 12):
             raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {tuple(a.shape)}")
-        if not bool(xp.all(xp.isfinite(a))):
+        finite = xp.isfinite(a)
+        if self.sync_free:  # raised at the next read; 0 in its place keeps the physics finite until then
+            self._checks.record("action", ~xp.all(finite, axis=1), self.steps_taken)
+            a = xp.where(finite, a, 0.0)
+        elif not bool(xp.all(finite)):
             raise ValueError("actions contain NaN or inf")
         a = xp.clip(a, -ACTION_BOUND, ACTION_BOUND)
         self.physics.ctrl[:] = self._cast(self._key_ctrl + self.config.action_scale * a, self.physics.ctrl)
@@ -529,39 +608,50 @@ class AnymalCore:
         time_before = xp.astype(physics.time, xp.float64)  # a copy
         failed = physics.step(self.config.decimation)
         self._check_physics()
-        diverged[failed] = True  # a simulation failed: end its episode, keep the others
+        if failed.shape[0]:  # a simulation failed: end its episode, keep the others (Warp reports none)
+            diverged[failed] = True
         expected = time_before + self.config.decimation * physics.timestep
         diverged |= xp.abs(self._float(physics.time) - expected) > 0.5 * physics.timestep
         return diverged | self._invalid_state()
 
     def _check_physics(self) -> None:
         """The backend's buffer check (dropped contacts would make every later step of a world wrong): every step
-        on the host, every :data:`DEVICE_CHECK_STEPS` steps on a device (it reads the device's flags)."""
-        self._steps_since_check += 1
-        if self._steps_since_check >= self._check_every:
-            self._steps_since_check = 0
+        on the host; on a device with the step's other checks (:meth:`raise_pending_errors`)."""
+        if not self.sync_free:
             self.physics.check_overflow()
+
+    def raise_pending_errors(self) -> None:
+        """Read a device step's checks and the physics' buffer flags (the host reads the step defers), and raise
+        what they hold: a NaN or inf action (ValueError), a non-finite observation or reward (FloatingPointError),
+        a buffer overflow (:class:`~margin_rl.envs.physics_warp.PhysicsOverflowError`), naming the first step and
+        the environments. Called by the step every :attr:`check_every` steps; a learner may call it too."""
+        self._steps_since_check = 0
+        hint = finite_output_hint(self.config)
+        self._checks.raise_pending({"observation": hint, "reward": hint})
+        self.physics.check_overflow()
 
     def _measure(self, diverged: np.ndarray) -> SimulationState:
         """The state after the step; a diverged environment's numbers are made finite for the bookkeeping."""
         state = self._read()
-        return state.finite() if diverged.any() else state
+        return state.finite() if self.sync_free or diverged.any() else state
 
     def _estimate_accelerations(self, state: SimulationState) -> Accelerations:
         """Finite differences of the velocities over the policy step, the CoM and base ones EMA-filtered."""
         alpha = self.config.acceleration_filter
         com_acc = (state.com_vel - self._prev_com_vel) / self.dt
         ang_acc = (state.ang_vel_world - self._prev_ang_vel) / self.dt
-        self._com_acc = alpha * self._com_acc + (1 - alpha) * com_acc
-        self._ang_acc = alpha * self._ang_acc + (1 - alpha) * ang_acc
+        com_filtered = alpha * self._com_acc + (1 - alpha) * com_acc
+        ang_filtered = alpha * self._ang_acc + (1 - alpha) * ang_acc
         joint_acc = (state.joint_vel - self._prev_joint_vel) / self.dt
-        copy = self.xp.asarray
-        self._prev_com_vel, self._prev_ang_vel = copy(state.com_vel, copy=True), copy(state.ang_vel_world, copy=True)
-        self._prev_joint_vel = copy(state.joint_vel, copy=True)
-        return Accelerations(self._com_acc, self._ang_acc, joint_acc, com_acc, ang_acc)
+        # the state in place (fixed addresses, what a recorded graph needs); the step's values are its own arrays
+        self._com_acc[...], self._ang_acc[...] = com_filtered, ang_filtered
+        self._prev_com_vel[...], self._prev_ang_vel[...] = state.com_vel, state.ang_vel_world
+        self._prev_joint_vel[...] = state.joint_vel
+        return Accelerations(com_filtered, ang_filtered, joint_acc, com_acc, ang_acc)
 
-    def _stability(self, state: SimulationState, acc: Accelerations) -> tuple[StabilityState, np.ndarray]:
-        """lambda's fields and the clipped margin (N,), one evaluation for the batch (lambda: :attr:`last_lambda`)."""
+    def _stability(self, state: SimulationState, acc: Accelerations) -> tuple[StabilityState, Any, Any]:
+        """lambda's fields, the clipped margin (N,) and lambda (N, 47), one evaluation for the batch (kept as
+        :attr:`last_lambda`)."""
         ext_force = self._push_applied
         stability = stability_state_from_simulation(
             state.base_rot,
@@ -578,8 +668,8 @@ class AnymalCore:
         )
         lam = stability.to_lambda()
         margin = self.xp.clip(self._margin_fn(lam), *MARGIN_CLIP)
-        self._last_margin, self._last_lambda = margin, lam
-        return stability, margin
+        self._last_margin[...], self._last_lambda[...] = margin, lam
+        return stability, margin, lam
 
     def _contact_normals(self, feet_xy: Any) -> Any:
         """(N, 4, 3) world-frame normals under the feet that lambda carries (:attr:`EnvConfig.margin_normals`)."""
@@ -596,8 +686,8 @@ class AnymalCore:
         touchdown = contacts & ~self._prev_contacts
         self._air_time += self.dt
         air_at_touchdown = xp.where(touchdown, self._air_time, 0.0)
-        self._air_time = xp.where(contacts, 0.0, self._air_time)
-        self._prev_contacts = xp.asarray(contacts, copy=True)
+        self._air_time[...] = xp.where(contacts, 0.0, self._air_time)
+        self._prev_contacts[...] = contacts
         return touchdown, air_at_touchdown
 
     def _edge_touchdowns(self, feet: Any, touchdown: Any) -> Any:
@@ -629,6 +719,7 @@ class AnymalCore:
         values: dict[str, np.ndarray],
         terms: dict[str, np.ndarray],
         margin: np.ndarray,
+        lam: Any,
         stability: StabilityState,
         diverged: np.ndarray,
         causes: dict[str, np.ndarray],
@@ -652,7 +743,11 @@ class AnymalCore:
             "touchdowns": xp.sum(flag(values["touchdown"]), axis=1),  # feet landing this step
             "edge_touchdowns": xp.sum(flag(values["edge_touchdown"]), axis=1),  # of them, on a step edge
             "base_height": values["base_height"],  # base origin above the terrain under it [m]
-            "lambda": self._last_lambda,  # (N, 47), the margin's input (names: stability.lambda_names())
+            # mean over the joints of tau^2 [(N m)^2], and 1 where a joint's actuator is at its force limit (the last
+            # physics step's actuator forces)
+            "joint_torque_sq": xp.mean(values["torques"] ** 2, axis=1),
+            "torque_at_limit": flag(xp.any(xp.abs(values["torques"]) >= self._torque_at_limit, axis=1)),
+            "lambda": lam,  # (N, 47), the margin's input (names: stability.lambda_names())
             "fell": flag(values["fell"]),
             "diverged": flag(diverged),
             **{info_key(name): flag(flags) for name, flags in causes.items()},
@@ -700,15 +795,23 @@ class AnymalCore:
             self._start_random_pushes(rnd)
         active = self._push_steps_left > 0
         # The force of this step, kept for lambda: the counter below already reads 0 during a push's last step.
-        self._push_applied = self.xp.where(active[:, None], self._push_force, 0.0)
-        xfrc[active, self._base, :3] = self._cast(self._push_force[active], xfrc)
-        self._push_steps_left = self.xp.clip(self._push_steps_left - 1, min=0)
+        self._push_applied[...] = self.xp.where(active[:, None], self._push_force, 0.0)
+        xfrc[:, self._base, :3] = self._cast(self._push_applied, xfrc)
+        self._push_steps_left[...] = self.xp.clip(self._push_steps_left - 1, min=0)
 
     def _start_random_pushes(self, rnd: RandomizationConfig) -> None:
         self._next_push -= 1
         start = self._next_push <= 0
         xp = self.xp
-        count = int(xp.sum(start))  # on a device: one read, for the number of draws
+        if self.sync_free:  # a draw per environment every step, used where a push starts: no count to read
+            angle = self.rng.uniform(0, 2 * np.pi, size=self.num_envs)
+            force = rnd.push_force * xp.stack([xp.cos(angle), xp.sin(angle), xp.zeros_like(angle)], axis=1)
+            interval = self.rng.exponential(rnd.push_interval_s / self.dt, size=self.num_envs)
+            self._push_force[...] = xp.where(start[:, None], force, self._push_force)
+            self._push_steps_left[...] = xp.where(start, self.push_steps(rnd.push_duration_s), self._push_steps_left)
+            self._next_push[...] = xp.where(start, interval, self._next_push)
+            return
+        count = int(xp.sum(start))  # the host's numpy draws: as many as pushes start
         if count:
             angle = self.rng.uniform(0, 2 * np.pi, size=count)
             self._push_force[start] = rnd.push_force * xp.stack(

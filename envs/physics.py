@@ -187,8 +187,11 @@ class MujocoBatchPhysics(ModelConstants):
 
     # ------------------------------------------------------------------ operations
     def reset(self, ids: np.ndarray, keyframe: int) -> None:
-        """Reset simulations ``ids`` to ``keyframe``, computing nothing (the caller writes the state, then
-        calls :meth:`forward`)."""
+        """Reset simulations ``ids`` (indices, or a (num_envs,) bool mask) to ``keyframe``, computing nothing (the
+        caller writes the state, then calls :meth:`forward`)."""
+        ids = np.asarray(ids)
+        if ids.dtype == np.bool_:
+            ids = np.flatnonzero(ids)
         self.batch.reset(ids=ids, keyframe=keyframe, stage=mujoco.mjtStage.mjSTAGE_NONE)
 
     def forward(self, ids: np.ndarray | None = None) -> None:

@@ -10,13 +10,17 @@ stated where the core or a user meets it):
 * **Where the arrays live.** The live arrays are torch tensors over the Warp arrays (``wp.to_torch``: the same
   memory, no copy), on the backend's device: CPU tensors on Warp's CPU device, CUDA tensors on a GPU. The core
   computes in the namespace of these arrays (:mod:`margin_rl.arrays`), so on a GPU the whole step stays there.
-* **CUDA graphs on a GPU.** There the decimated step (``nstep`` physics steps and the forward pass) is captured
-  once per ``nstep`` as a CUDA graph and replayed (eager launching is an order of magnitude slower): the
-  graph keeps the arrays it was captured with, and this backend never replaces one (per-world fields and resets
-  write in place). The kernels run on Warp's own stream of the device, a blocking stream: it synchronises with
-  CUDA's default stream, where torch runs the core's operations unless told otherwise, so the two are ordered
-  without an explicit wait (and a graph cannot be captured on torch's default stream). On the CPU device every call
-  launches eagerly (graphs are CUDA-only).
+* **Graphs.** Each of the three things the core asks of the physics per step is recorded once as a Warp graph and
+  replayed: the decimated step (``nstep`` physics steps and the forward pass, one graph per ``nstep``), the reset of
+  the worlds a mask selects (``reset_data`` with a mask this backend owns: ``reset_data_keyframe`` would allocate a
+  mask per call) and the forward pass. On a GPU they are CUDA graphs (eager launching is an order of magnitude
+  slower, and MuJoCo Warp's solver loop, ``capture_while``, reads the host on every iteration outside a capture);
+  on Warp's CPU device Warp records and replays them the same way, so the tests replay what a GPU replays. A graph
+  keeps the arrays it was captured with: this backend never replaces one (per-world fields, resets and the
+  keyframe's state write in place), and captures again after :meth:`set_const`. ``graphs=False`` launches every
+  call eagerly (debugging). The kernels run on Warp's own stream of the device, a blocking stream: it synchronises
+  with CUDA's default stream, where torch runs the core's operations unless told otherwise, so the two are ordered
+  without an explicit wait (and a graph cannot be captured on torch's default stream).
 * **Buffers of a stated size.** Warp allocates its contact and constraint buffers once (MuJoCo grows its arena).
   :func:`contact_budget` sizes them from the model; a step that needs more sets ``Data.overflow``, which this
   backend ORs into a flag of its own on the device after every step (kept across resets, which clear
@@ -26,8 +30,10 @@ stated where the core or a user meets it):
 * **Divergence.** Warp neither raises nor resets a simulation whose accelerations blow up: its state turns
   non-finite and stays so, which the core's divergence check (non-finite or too fast) catches; :meth:`step`
   never reports failed ids of its own.
-* **Resets** go through ``mujoco_warp.reset_data_keyframe`` with a per-world keyframe index (-1: left alone), so
-  the solver's warm start, the applied forces and the clock of a reset world are cleared as MuJoCo clears them.
+* **Resets** go through ``mujoco_warp.reset_data`` with a per-world mask (given as ids, or as a bool tensor on the
+  device: no host read), then the keyframe's clock, positions, velocities and controls are written where the mask
+  holds, so the solver's warm start, the applied forces and the clock of a reset world are cleared as MuJoCo
+  clears them (``reset_data_keyframe``'s result, for models without actuator activations or mocap bodies).
 
 Kernels compile on first use (tens of seconds for ANYmal on one CPU core, cached in ``~/.cache/warp`` after).
 """
@@ -147,10 +153,20 @@ class WarpPhysics(ModelConstants):
         device: str | None = None,
         nconmax: int | None = None,
         njmax: int | None = None,
+        graphs: bool = True,
     ) -> None:
         """``device``: a Warp device name (see :func:`check_warp_device`); ``nconmax``, ``njmax``: contacts and
-        constraint rows per world (None: :func:`contact_budget`)."""
+        constraint rows per world (None: :func:`contact_budget`); ``graphs``: record and replay (module docstring),
+        or launch eagerly."""
+        if model.na or model.nmocap:
+            raise ValueError(
+                f"the Warp backend resets worlds to a keyframe's positions, velocities and controls only; this model "
+                f"has {model.na} actuator activations and {model.nmocap} mocap bodies, which it would not restore"
+            )
+        if not isinstance(graphs, bool):
+            raise TypeError(f"graphs must be True or False, got {graphs!r}")
         self.model = model
+        self.graphs = graphs
         self.num_envs = num_envs
         self.device = check_warp_device(device)
         default_nconmax, default_njmax = contact_budget(model)
@@ -164,9 +180,9 @@ class WarpPhysics(ModelConstants):
             self._data = mjw.make_data(
                 model, nworld=num_envs, nconmax=self.nconmax, njmax=self.njmax, naconmax=self.nconmax * num_envs
             )
-            self._keyframe_of_world = wp.full(num_envs, -1, dtype=int)
+            self._reset_worlds = wp.zeros(num_envs, dtype=bool)  # the mask reset_data reads: this backend's own
             self._state_rows = wp.zeros((num_envs, mujoco.mj_stateSize(model, INTEGRATION_STATE)), dtype=float)
-        self._graphs: dict[int, Any] = {}  # nstep -> the captured CUDA graph of one decimated step
+        self._graphs: dict[Any, Any] = {}  # ("step", nstep), "reset", "forward" -> its recorded graph
         self._no_failures = torch.zeros(0, dtype=torch.int64, device=wp.device_to_torch(self.device))
         data, view = self._data, wp.to_torch
         self.qpos, self.qvel, self.time = view(data.qpos), view(data.qvel), view(data.time)
@@ -175,7 +191,8 @@ class WarpPhysics(ModelConstants):
         self.actuator_force = view(data.actuator_force)
         self._overflow = view(data.overflow)
         self._overflow_seen = torch.zeros_like(self._overflow)  # on the device, kept across resets (which clear it)
-        self._keyframes = view(self._keyframe_of_world)
+        self._reset_mask = view(self._reset_worlds)
+        self._keyframes: dict[int, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
         self._per_env_fields = {name: view(getattr(self._model, name)) for name in PER_ENV_FIELDS}
 
     def _on_device(self) -> Any:
@@ -194,44 +211,67 @@ class WarpPhysics(ModelConstants):
         return self._per_env_fields[name]
 
     def set_const(self) -> None:
-        """Recompute the constants derived from the per-world model fields (``mujoco_warp.set_const``); the step's
-        CUDA graphs are captured again at the next step, in case a model array was re-allocated (a graph keeps the
-        arrays it was captured with)."""
+        """Recompute the constants derived from the per-world model fields (``mujoco_warp.set_const``); the graphs
+        are captured again at their next use, in case a model array was re-allocated (a graph keeps the arrays it was
+        captured with)."""
         with self._on_device():
             mjw.set_const(self._model, self._data)
         self._graphs.clear()
 
     # ------------------------------------------------------------------ operations
-    def reset(self, ids: np.ndarray, keyframe: int) -> None:
+    def reset(self, ids: Any, keyframe: int) -> None:
         """Reset worlds ``ids`` to ``keyframe`` (state, controls, applied forces, warm start, clock), computing
-        nothing (the caller writes the state, then calls :meth:`forward`)."""
+        nothing (the caller writes the state, then calls :meth:`forward`). ``ids``: world indices, or a (num_envs,)
+        bool tensor on the device (the worlds where it holds: no host read, the same launches whichever they are)."""
         self._collect_overflow()
-        self._keyframes.fill_(-1)
-        self._keyframes[torch.as_tensor(ids, dtype=torch.int64, device=self._keyframes.device)] = keyframe
-        with self._on_device():
-            mjw.reset_data_keyframe(self._model, self._data, self._keyframe_of_world)
+        mask = self._reset_mask
+        if isinstance(ids, torch.Tensor) and ids.dtype == torch.bool:
+            mask.copy_(ids)
+        else:
+            mask.fill_(False)
+            mask[torch.as_tensor(ids, dtype=torch.int64, device=mask.device)] = True
+        self._replay("reset", lambda: mjw.reset_data(self._model, self._data, self._reset_worlds))
+        rows = mask[:, None]
+        for live, value in zip((self.qpos, self.qvel, self.ctrl), self._keyframe_state(keyframe), strict=True):
+            live[...] = torch.where(rows, value, live)
+        self.time[...] = torch.where(mask, float(self.model.key(keyframe).time[0]), self.time)
+
+    def _keyframe_state(self, keyframe: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The keyframe's qpos, qvel and ctrl as tensors on the device, made once (not copied from the host at every
+        reset)."""
+        if keyframe not in self._keyframes:
+            key = self.model.key(keyframe)
+            self._keyframes[keyframe] = tuple(
+                torch.as_tensor(value, dtype=live.dtype, device=live.device)
+                for live, value in ((self.qpos, key.qpos), (self.qvel, key.qvel), (self.ctrl, key.ctrl))
+            )
+        return self._keyframes[keyframe]
 
     def forward(self, ids: np.ndarray | None = None) -> None:
         """Compute every derived quantity of the worlds. Warp's forward pass has no world mask: it runs on all
         of them, which leaves the others' outputs as they were (a forward pass is a function of the state)."""
-        with self._on_device():
-            mjw.forward(self._model, self._data)
+        self._replay("forward", lambda: mjw.forward(self._model, self._data))
 
     def step(self, nstep: int) -> Any:
         """Advance every world by ``nstep`` physics steps, then compute the derived quantities of the new state
-        (as ``mujoco.batch`` with ``stage=mjSTAGE_ACC``); a CUDA graph on a GPU (module docstring). Returns no ids
-        (an empty tensor): Warp reports no failed simulation (see the module docstring)."""
-        with self._on_device():
-            if self.device == "cpu":
-                self._launch_step(nstep)
-            else:
-                if nstep not in self._graphs:
-                    with wp.ScopedCapture() as capture:
-                        self._launch_step(nstep)
-                    self._graphs[nstep] = capture.graph
-                wp.capture_launch(self._graphs[nstep])
+        (as ``mujoco.batch`` with ``stage=mjSTAGE_ACC``), replayed as a graph (module docstring). Returns no ids (an
+        empty tensor): Warp reports no failed simulation (see the module docstring)."""
+        self._replay(("step", nstep), lambda: self._launch_step(nstep))
         self._collect_overflow()
         return self._no_failures
+
+    def _replay(self, key: Any, launch: Any) -> None:
+        """Run ``launch`` (Warp launches only): the first time recorded as graph ``key``, then its replay; eagerly
+        where ``graphs`` is off."""
+        with self._on_device():
+            if not self.graphs:
+                launch()
+                return
+            if key not in self._graphs:
+                with wp.ScopedCapture() as capture:
+                    launch()
+                self._graphs[key] = capture.graph
+            wp.capture_launch(self._graphs[key])
 
     def _launch_step(self, nstep: int) -> None:
         for _ in range(nstep):

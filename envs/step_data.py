@@ -99,10 +99,16 @@ def check_finite_outputs(config: EnvConfig, reward: np.ndarray | float, *observa
     bad_observation = not all(bool(xp.all(xp.isfinite(o))) for o in observations)
     if not bad_observation and bool(xp.all(xp.isfinite(xp.asarray(reward)))):
         return
-    rnd = config.randomization
     raise FloatingPointError(
-        f"the {'observation' if bad_observation else 'reward'} is not finite: an EnvConfig value is too large for "
-        f"float arithmetic (margin_weight={config.margin_weight}, "
+        f"the {'observation' if bad_observation else 'reward'} is not finite: {finite_output_hint(config)}"
+    )
+
+
+def finite_output_hint(config: EnvConfig) -> str:
+    """What makes an output non-finite, and what to change: the settings that scale the outputs."""
+    rnd = config.randomization
+    return (
+        f"an EnvConfig value is too large for float arithmetic (margin_weight={config.margin_weight}, "
         f"reward_params.alive_bonus={config.reward_params.alive_bonus}, "
         f"randomization.observation_noise={rnd.observation_noise}, reset_velocity_noise={rnd.reset_velocity_noise}); "
         "use values of the order of the defaults"

@@ -19,6 +19,10 @@ every episode that ends. Metric names and units:
 ``base_height_mean``             mean height of the base origin above the terrain under it [m]
 ``edge_landing_fraction``        share of the episode's foot touchdowns on a step edge (``info["edge_touchdowns"]``
                                  over ``info["touchdowns"]``; 0 on flat ground, NaN without a touchdown)
+``torque_rms``                   RMS of the joint torques over the joints and the episode [N m]
+``torque_limit_fraction``        share of the episode's steps with a joint at its actuator's force limit
+``margin_reward_share``          |sum of the margin term| over the sum of every term's |sum| (``reward/<term>``):
+                                 the margin term's share of the episode's reward (absent without a margin term)
 ``fell``, ``diverged``           1 if the episode ended in a fall / a diverged simulation, else 0
 ``termination/<cause>``          1 if the cause held on the episode's last step (``info["termination_<cause>"]``;
                                  the causes of :mod:`margin_rl.envs.terminations`, several may hold at once)
@@ -129,6 +133,10 @@ class EpisodeStatistics:
         self._base_height = self._zeros(n)
         self._touchdowns = self._zeros(n)
         self._edge_touchdowns = self._zeros(n)
+        self._torque_sq = self._zeros(n)
+        self._torque_at_limit = self._zeros(n)
+        self._window_keys: tuple[str, ...] | None = None  # accumulate(): the metrics summed, in order
+        self._window = self._zeros(2, 0)  # accumulate(): (sum, count) per metric over the episodes ended
 
     def _zeros(self, *shape: int, dtype: Any = None) -> Any:
         xp = self._xp
@@ -141,7 +149,20 @@ class EpisodeStatistics:
     def reset(self, ids: Any = None) -> None:
         """Start new episodes in environments ``ids`` (all if None)."""
         ids = slice(None) if ids is None else like(ids, self._return)
-        for array in (
+        for array in self._episode_sums():
+            array[ids] = 0
+        self._margin_min[ids] = math.inf
+
+    def _reset_where(self, done: Any) -> None:
+        """Start new episodes where ``done`` ((N,) bool) holds, in place and without a host read."""
+        xp = self._xp
+        for array in self._episode_sums():
+            array[...] = xp.where(xp.reshape(done, (-1,) + (1,) * (array.ndim - 1)), 0, array)
+        self._margin_min[...] = xp.where(done, math.inf, self._margin_min)
+
+    def _episode_sums(self) -> tuple[Any, ...]:
+        """The per-environment sums an episode starts from zero."""
+        return (
             self._return,
             self._length,
             self._terms,
@@ -158,9 +179,9 @@ class EpisodeStatistics:
             self._base_height,
             self._touchdowns,
             self._edge_touchdowns,
-        ):
-            array[ids] = 0
-        self._margin_min[ids] = math.inf
+            self._torque_sq,
+            self._torque_at_limit,
+        )
 
     def update(
         self,
@@ -171,6 +192,47 @@ class EpisodeStatistics:
     ) -> dict[str, np.ndarray]:
         """Add one step of every environment; returns the metrics (arrays over the finished episodes, in
         environment order, plus ``"env"``: their indices) and starts new episodes there. Empty when none ended."""
+        xp = self._xp
+        self._add_step(reward, info)
+        truncated = xp.astype(xp.asarray(truncated), xp.bool, copy=False)
+        done = xp.astype(xp.asarray(terminated), xp.bool, copy=False) | truncated
+        if not bool(xp.any(done)):
+            return {}
+        ids = xp.nonzero(done)[0]
+        metrics = self._finish(ids, info, truncated)
+        self.reset(ids)
+        return metrics
+
+    def accumulate(self, reward: Any, info: Mapping[str, Any], terminated: Any, truncated: Any) -> None:
+        """:meth:`update` without a host read: the metrics of the episodes that end are summed where the sums are
+        (each metric over the episodes where it is finite), for :meth:`drain` to read once per window (a rollout);
+        the same work every step, however many episodes end."""
+        xp = self._xp
+        self._add_step(reward, info)
+        truncated = xp.astype(xp.asarray(truncated), xp.bool, copy=False)
+        done = xp.astype(xp.asarray(terminated), xp.bool, copy=False) | truncated
+        metrics = self._metrics(slice(None), info, truncated)
+        metrics.pop("env")
+        if self._window_keys is None:
+            self._window_keys = tuple(metrics)
+            self._window = self._zeros(2, len(self._window_keys))
+        values = xp.stack([xp.astype(metrics[key], xp.float64) for key in self._window_keys])  # (K, N)
+        counted = done[None, :] & xp.isfinite(values)
+        self._window[0] += xp.sum(xp.where(counted, values, 0.0), axis=1)
+        self._window[1] += xp.sum(xp.astype(counted, xp.float64), axis=1)
+        self._reset_where(done)
+
+    def drain(self) -> dict[str, float]:
+        """The mean of each metric over the episodes that ended since the last drain (where finite; metrics no such
+        episode gave are left out), read from the sums in one host read, which start again from zero."""
+        if self._window_keys is None:
+            return {}
+        sums, counts = np.array(to_numpy(self._window))  # a copy: on the CPU to_numpy shares the tensor's memory
+        self._window[...] = 0.0
+        return {key: float(sums[k] / counts[k]) for k, key in enumerate(self._window_keys) if counts[k]}
+
+    def _add_step(self, reward: Any, info: Mapping[str, Any]) -> None:
+        """Add one step of every environment to the running sums."""
         xp, f = self._xp, self._float
         if not self.terms:
             self.terms = reward_terms(info)
@@ -181,29 +243,23 @@ class EpisodeStatistics:
             self._terms += xp.stack([info[f"reward_{t}"] for t in self.terms], axis=1)
         margin = f(info["margin"])
         self._margin_sum += margin
-        self._margin_min = xp.minimum(self._margin_min, margin)
+        self._margin_min[...] = xp.minimum(self._margin_min, margin)
         self._margin_negative += margin < 0
         counted = (self._length > self.warmup_steps)[:, None]
         lin, ang = xp.asarray(info["base_lin_acc"]), xp.asarray(info["base_ang_acc"])
         self._acc_count += counted[:, 0]
         self._lin_sq += counted * lin**2
         self._ang_sq += counted * ang**2
-        self._lin_peak = xp.where(counted, xp.maximum(self._lin_peak, xp.abs(lin)), self._lin_peak)
-        self._ang_peak = xp.where(counted, xp.maximum(self._ang_peak, xp.abs(ang)), self._ang_peak)
+        self._lin_peak[...] = xp.where(counted, xp.maximum(self._lin_peak, xp.abs(lin)), self._lin_peak)
+        self._ang_peak[...] = xp.where(counted, xp.maximum(self._ang_peak, xp.abs(ang)), self._ang_peak)
         self._vel_err += info["velocity_error"]
         self._fwd_vel += xp.asarray(info["base_lin_vel"])[:, 0]
         self._stance += info["stance_width"]
         self._base_height += info["base_height"]
         self._touchdowns += info["touchdowns"]
         self._edge_touchdowns += info["edge_touchdowns"]
-        truncated = xp.astype(xp.asarray(truncated), xp.bool, copy=False)
-        done = xp.astype(xp.asarray(terminated), xp.bool, copy=False) | truncated
-        if not bool(xp.any(done)):
-            return {}
-        ids = xp.nonzero(done)[0]
-        metrics = self._finish(ids, info, truncated)
-        self.reset(ids)
-        return metrics
+        self._torque_sq += info["joint_torque_sq"]
+        self._torque_at_limit += info["torque_at_limit"]
 
     def close(self, ids: Any, info: Mapping[str, Any]) -> dict[str, np.ndarray]:
         """End the running episodes of ``ids`` without another step (counted as time-outs); their metrics."""
@@ -216,6 +272,11 @@ class EpisodeStatistics:
 
     def _finish(self, ids: Any, info: Mapping[str, Any], truncated: Any) -> dict[str, np.ndarray]:
         """The metrics of the episodes of ``ids``, computed where the sums are and returned as numpy."""
+        return {key: to_numpy(value) for key, value in self._metrics(ids, info, truncated).items()}
+
+    def _metrics(self, ids: Any, info: Mapping[str, Any], truncated: Any) -> dict[str, Any]:
+        """The metrics of the episodes of ``ids`` (indices, or ``slice(None)``: every environment), where the sums
+        are."""
         xp, f = self._xp, self._float
         copy = xp.asarray
         length = xp.astype(self._length[ids], xp.float64)
@@ -232,6 +293,10 @@ class EpisodeStatistics:
         }
         for j, term in enumerate(self.terms):
             metrics[f"reward/{term}"] = copy(self._terms[ids, j], copy=True)
+        if "margin" in self.terms:
+            magnitude = xp.sum(xp.abs(self._terms[ids]), axis=1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                metrics["margin_reward_share"] = xp.abs(self._terms[ids, self.terms.index("margin")]) / magnitude
         metrics["margin_mean"] = self._margin_sum[ids] / length
         metrics["margin_min"] = copy(self._margin_min[ids], copy=True)
         metrics["margin_negative_fraction"] = self._margin_negative[ids] / length
@@ -244,6 +309,8 @@ class EpisodeStatistics:
         metrics["forward_velocity_mean"] = self._fwd_vel[ids] / length
         metrics["stance_width_mean"] = self._stance[ids] / length
         metrics["base_height_mean"] = self._base_height[ids] / length
+        metrics["torque_rms"] = xp.sqrt(self._torque_sq[ids] / length)
+        metrics["torque_limit_fraction"] = self._torque_at_limit[ids] / length
         with np.errstate(invalid="ignore", divide="ignore"):
             metrics["edge_landing_fraction"] = self._edge_touchdowns[ids] / self._touchdowns[ids]
         metrics["fell"] = f(info["fell"])[ids]
@@ -252,7 +319,7 @@ class EpisodeStatistics:
             if info_key(cause) in info:
                 metrics[f"termination/{cause}"] = f(info[info_key(cause)])[ids]
         metrics["timed_out"] = xp.astype(truncated[ids], xp.float64)
-        return {key: to_numpy(value) for key, value in metrics.items()}
+        return metrics
 
 
 def split_episodes(metrics: Mapping[str, np.ndarray]) -> list[dict[str, float]]:
@@ -287,6 +354,12 @@ def tensorboard_tags(metrics: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]
 def step_tags(info: Mapping[str, Any]) -> dict[str, float]:
     """Per-step statistics over the batch (logged every step, also before any episode ends), reduced where the info
     arrays are (numpy or a device's tensors) and read back once."""
+    names, values = step_statistics(info)
+    return {name: float(value) for name, value in zip(names, to_numpy(values), strict=True)}
+
+
+def step_statistics(info: Mapping[str, Any]) -> tuple[tuple[str, ...], Any]:
+    """The tags of :func:`step_tags` and their values as one array where the info arrays are (no host read)."""
     xp = namespace(info["margin"])
     margin = xp.astype(xp.asarray(info["margin"]), xp.float64, copy=False)
     lin = xp.linalg.vector_norm(xp.asarray(info["base_lin_acc"]), axis=1)
@@ -296,8 +369,7 @@ def step_tags(info: Mapping[str, Any]) -> dict[str, float]:
     if "terrain_level" in info:  # the terrain curriculum's mean level
         statistics.append(xp.mean(xp.astype(xp.asarray(info["terrain_level"]), xp.float64)))
         names.append("Curriculum/terrain_level_mean")
-    values = to_numpy(xp.stack(statistics))
-    return {name: float(value) for name, value in zip(names, values, strict=True)}
+    return tuple(names), xp.stack(statistics)
 
 
 def summarize(episodes: Iterable[Mapping[str, float]]) -> dict[str, dict[str, float]]:

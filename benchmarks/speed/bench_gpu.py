@@ -123,12 +123,13 @@ def timed_rate(step: Callable[[int], None], steps: int, num_envs: int, device: s
 def make_core(num_envs: int, device: str, margin: str, env_id: str = ROBOT_ID, recipe: str = RECIPE) -> Any:
     """The environment core of ``recipe`` on ``env_id`` (default: the robust recipe on flat ANYmal C) on the Warp
     backend at ``device``."""
-    from margin_rl.envs.core import AnymalCore
+    from margin_rl.envs.core import DEVICE_CHECK_STEPS, AnymalCore
     from margin_rl.train.commands.train import build_parser, spec_from_args
 
     spec, _, _ = spec_from_args(build_parser().parse_args(["--env", env_id, "--recipe", recipe]))
     config = spec.env_config.replace(margin=margin)
     core = AnymalCore(config, num_envs, seed=0, physics="warp", physics_device=device)
+    core.check_every = DEVICE_CHECK_STEPS  # its checks read once per rollout, as the rsl-rl adapter sets them
     core.reset(seed=0)
     return core
 
@@ -226,6 +227,7 @@ def ppo(
         progress(f"PPO, {num_envs} environments: environment built")
         with quiet_stdout(True):  # rsl-rl prints the networks and a block per iteration
             runner = OnPolicyRunner(env, spec.backend_config("bench"), log_dir=None, device=device)
+            env.set_rollout_length(int(runner.cfg["num_steps_per_env"]))  # as train's runner sets it
             runner.learn(num_learning_iterations=1)  # warm-up: graphs, kernels, the optimizer's state
             synchronize(device)
             t0 = time.perf_counter()

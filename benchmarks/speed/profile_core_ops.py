@@ -1,9 +1,11 @@
 """Profile: the torch operations of one environment step of the core on the Warp backend, and its host time.
 
 On a GPU every torch operation that computes is a kernel launch from Python, so the count of operations per step
-bounds how fast the core can step whatever the batch size. This runs the core of the GPU benchmark
-(:func:`benchmarks.speed.bench_gpu.make_core`) on Warp's CPU device, times the step with and without its physics,
-and counts the aten operations per step with ``torch.profiler``::
+bounds how fast the core can step whatever the batch size, and every host read stalls it. This runs the core of the
+GPU benchmark (:func:`benchmarks.speed.bench_gpu.make_core`) on Warp's CPU device, times the step with and without
+its physics, counts the aten operations it dispatches per step, its host reads and random numbers
+(:class:`~benchmarks.tools.host_reads.DispatchCounter`, a ``TorchDispatchMode``: top-level operations, not
+torch.profiler's nested ones), then the host reads per step of rsl-rl's training loop over the adapter::
 
     python benchmarks/speed/profile_core_ops.py [--num-envs 16] [--steps 20] [--env margin_rl/AnymalC-v1]
 """
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -20,6 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository r
 import torch
 
 from benchmarks.speed.bench_gpu import RECIPE, ROBOT_ID, make_core, random_actions
+from benchmarks.tools.host_reads import DispatchCounter
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -50,22 +54,57 @@ def main(argv: list[str] | None = None) -> int:
         core.step(actions[k])
     total = (time.perf_counter() - start) / args.steps
     physics = physics_seconds[0] / args.steps
-    with torch.profiler.profile(activities=[torch.profiler.ProfilerActivity.CPU]) as profile:
+    counter = DispatchCounter()
+    with counter:
         for k in range(5 + args.steps, 5 + 2 * args.steps):
             core.step(actions[k])
-    events = [e for e in profile.key_averages() if e.key.startswith("aten::")]
-    per_step = sum(e.count for e in events) / args.steps
     rest = total - physics
     print(
         f"{args.env}, {args.num_envs} environments on Warp's CPU device, per step: {1e3 * total:.2f} ms, of it "
-        f"physics {1e3 * physics:.2f} ms, the rest {1e3 * rest:.2f} ms; {per_step:,.0f} aten calls"
+        f"physics {1e3 * physics:.2f} ms, the rest {1e3 * rest:.2f} ms; {counter.total / args.steps:,.0f} aten "
+        f"operations dispatched, {sum(counter.host_reads.values()) / args.steps:.1f} host reads "
+        f"({dict(counter.host_reads)}), {counter.random_numbers / args.steps:,.0f} random numbers"
     )
-    print("\n| operation | calls per step | self CPU time per step [ms] |\n|---|---|---|")
-    for event in sorted(events, key=lambda e: -e.count)[: args.top]:
-        print(
-            f"| `{event.key}` | {event.count / args.steps:.0f} | {event.self_cpu_time_total / args.steps / 1e3:.3f} |"
-        )
+    print("\n| operation | dispatched per step |\n|---|---|")
+    for name, count in counter.ops.most_common(args.top):
+        print(f"| `{name}` | {count / args.steps:.0f} |")
+    print("\n" + rsl_host_reads(args.env, args.recipe, args.num_envs))
     return 0
+
+
+def rsl_host_reads(env_id: str, recipe: str, num_envs: int, rollout: int = 8) -> str:
+    """Host reads per environment step in rsl-rl's training loop over the adapter (one iteration of ``rollout``
+    steps, its update included), with rsl-rl's NaN check on and off, beside the adapter's own step."""
+    from rsl_rl.runners import OnPolicyRunner
+
+    from margin_rl.train import make_rsl_env
+    from margin_rl.train.config import RslPPOConfig
+    from margin_rl.train.recipes import get_recipe, with_recipe
+
+    lines = ["| rsl-rl loop, per environment step | host reads | of them |", "|---|---|---|"]
+    options = with_recipe(get_recipe(recipe), {})
+    for check_for_nan in (True, False):
+        env = make_rsl_env(env_id, num_envs, seed=0, physics="warp", physics_device="cpu", **options)
+        config = RslPPOConfig(num_steps_per_env=rollout).runner_cfg(False, 50) | {"check_for_nan": check_for_nan}
+        with tempfile.TemporaryDirectory() as logs:
+            runner = OnPolicyRunner(env, config, log_dir=logs)
+            env.set_rollout_length(rollout)
+            runner.learn(num_learning_iterations=1)  # kernels, first rollout
+            counter = DispatchCounter()
+            with counter:
+                runner.learn(num_learning_iterations=1)
+        reads = sum(counter.host_reads.values()) / rollout
+        lines.append(f"| `check_for_nan={check_for_nan}`, logger on | {reads:.1f} | {dict(counter.host_reads)} |")
+    adapter = make_rsl_env(env_id, num_envs, seed=0, physics="warp", physics_device="cpu", **options)
+    adapter.set_rollout_length(rollout)
+    counter = DispatchCounter()
+    with counter:
+        for _ in range(rollout):
+            adapter.step(torch.zeros(num_envs, 12))
+    lines.append(
+        f"| the adapter's step alone | {sum(counter.host_reads.values()) / rollout:.1f} | {dict(counter.host_reads)} |"
+    )
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -75,15 +75,19 @@ def stability_fingerprints(n: int) -> dict[str, str]:
     return out
 
 
-NEW_INFO_KEY = re.compile(r"^_?(termination_|(edge_)?touchdowns$)")
+NEW_INFO_KEY = re.compile(r"^_?(termination_|(edge_)?touchdowns$|joint_torque_sq$|torque_at_limit$)")
 """Info keys added after the first fingerprints (the ANYmal ids' v1 termination causes, the feet landing and those on
-step edges): left out of the env digests, so that every number the earlier files hold is still compared."""
+step edges, the joint torques' mean square and the flag of a joint at its torque limit): left out of the env digests,
+so that every number the earlier files hold is still compared."""
 
 
-NEW_METRIC = re.compile(r"^(termination/|edge_landing_fraction$)")
+NEW_METRIC = re.compile(
+    r"^(termination/|edge_landing_fraction$|torque_rms$|torque_limit_fraction$|margin_reward_share$)"
+)
 """Episode metrics added after the first fingerprints (the v1 termination causes, the share of landings on step
-edges), left out of the demo's digest; the grid's termination causes were there from its first fingerprint, and
-leaving them out of both files compares the same numbers."""
+edges, the joint torques' RMS, the share of steps at a torque limit, the margin term's share of the reward), left
+out of the demo's digest; the grid's termination causes were there from its first fingerprint, and leaving them out
+of both files compares the same numbers."""
 
 
 def _digested(info: dict[str, Any]) -> list[str]:

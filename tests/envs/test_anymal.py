@@ -520,6 +520,28 @@ def test_base_acceleration_term_is_the_metrics_acceleration(toy_weights: str) ->
         np.testing.assert_allclose(out.info["reward_base_acceleration"][env], -0.01 * (acc @ acc), rtol=1e-6)
 
 
+def test_torque_info_reads_the_actuators_against_the_mjcf_forceranges(toy_weights: str) -> None:
+    """``joint_torque_sq`` is the mean over the joints of the actuator forces squared, ``torque_at_limit`` 1 where one
+    of them reaches its MJCF forcerange (read here from MuJoCo's model by actuator): never while standing still,
+    on most steps of full-scale alternating actions."""
+    config = EnvConfig(robot="anymal_c", margin_weights=toy_weights, randomization=NO_NOISE, action_scale=2.0)
+    core = AnymalCore(config, 2, seed=0)
+    core.reset()
+    model = core.physics.model
+    limits = np.array([model.actuator(i).forcerange[1] for i in range(model.nu)])
+    standing = core.step(np.zeros((2, 12)))
+    assert not standing.info["torque_at_limit"].any()
+    at_limit = []
+    for k in range(10):
+        out = core.step(np.full((2, 12), (-1.0) ** k))
+        forces = np.asarray(core.physics.actuator_force)
+        np.testing.assert_allclose(out.info["joint_torque_sq"], np.mean(forces**2, axis=1), rtol=1e-12)
+        expected = np.any(np.abs(forces) >= limits * (1 - 1e-4), axis=1)
+        np.testing.assert_array_equal(out.info["torque_at_limit"], expected.astype(float))
+        at_limit.append(expected)
+    assert np.mean(at_limit) > 0.5
+
+
 def test_base_height_term_matches_the_base_body_in_mujoco(toy_weights: str) -> None:
     """The term is max(0, f h_standing - z_base), h_standing read from the MJCF's standing keyframe independently
     of the environment (model.key_qpos) and z_base from an independent mj_forward of the same state; the step's

@@ -74,9 +74,13 @@ def _mirror(source: AnymalCore, target: AnymalCore) -> None:
 
 
 def _pair(terrain: str, **options: object) -> tuple[AnymalCore, AnymalCore]:
+    """A mujoco.batch core and a Warp one of the same config; the reference steps as a device does (sync_free: a draw
+    per environment for pushes and autoresets, resets by mask), so that mirrored generators draw the same numbers."""
     config = EnvConfig(robot="anymal_c", terrain=terrain, randomization=RANDOMISED, **options)
     reference = AnymalCore(config, num_envs=N, seed=3)
+    reference.sync_free = True
     warp = AnymalCore(config, num_envs=N, seed=3, **WARP_CPU)
+    assert warp.sync_free
     reference.reset(seed=11)
     return reference, warp
 
@@ -325,13 +329,13 @@ def test_rsl_rl_gets_the_physics_tensors_without_a_copy() -> None:
 
 
 def test_an_overflow_between_two_device_checks_is_kept_until_the_next() -> None:
-    """On a GPU the core reads the buffer flags once per DEVICE_CHECK_STEPS steps (here forced on Warp's CPU device):
-    an overflow in between is not lost, it is raised at the next check."""
+    """A device core reads the buffer flags once per check_every steps (the learner's rollout; the same on Warp's CPU
+    device as on a GPU): an overflow in between is not lost, it is raised at the next check."""
     from margin_rl.envs.core import DEVICE_CHECK_STEPS
 
     config = EnvConfig(robot="anymal_c", terrain="flat")
     core = AnymalCore(config, num_envs=2, seed=0, physics_options={"nconmax": 1, "njmax": 4}, **WARP_CPU)
-    core._check_every = DEVICE_CHECK_STEPS  # as on a GPU
+    core.check_every = DEVICE_CHECK_STEPS  # as the rsl-rl adapter sets it
     core.reset(seed=0)
     for _ in range(DEVICE_CHECK_STEPS - 1):  # the feet land within these steps: the buffers overflow
         core.step(np.zeros((2, 12)))

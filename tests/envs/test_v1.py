@@ -136,9 +136,10 @@ def test_reward_params_is_one_checked_mapping() -> None:
         "base_height_fraction": 0.9,
         "termination_penalty": 0.0,
         "yaw_tracking": 0.0,
+        "base_acceleration": 0.0,
         "logistic_gain": 8.0,
     }
-    assert params["alive_bonus"] == params.alive_bonus == 0.1 and len(params) == 8
+    assert params["alive_bonus"] == params.alive_bonus == 0.1 and len(params) == 9
     with pytest.raises(KeyError, match="the reward parameters are alive_bonus"):
         params["bonus"]
     assert EnvConfig(reward_params={"alive_bonus": 0.1}).reward_params == params

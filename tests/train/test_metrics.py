@@ -4,6 +4,7 @@ metrics the host's numpy sums give (the hand-checked cases are in tests/train/ba
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -35,6 +36,8 @@ def step_info(rng: np.random.Generator) -> dict[str, np.ndarray]:
         "base_height": rng.uniform(0.4, 0.6, N),
         "touchdowns": rng.integers(0, 3, N).astype(float),
         "edge_touchdowns": rng.integers(0, 2, N).astype(float),
+        "joint_torque_sq": rng.uniform(0, 900, N),
+        "torque_at_limit": (rng.random(N) < 0.05).astype(float),
         "fell": (rng.random(N) < 0.1).astype(float),
         "diverged": np.zeros(N),
         "termination_base_contact": (rng.random(N) < 0.1).astype(float),
@@ -84,3 +87,51 @@ def test_the_comparison_columns_add_the_fall_causes_and_edge_landings_off_flat_g
     # a report's columns are the labelled metrics it has a mean of, in table order; unknown keys are not columns
     variants = {"a": {"mean": {"fell": 0.1, "edge_landing_fraction": 0.2, "return": 3.0, "lin_acc_rms": 1.0}}}
     assert list(table_metrics(variants)) == ["lin_acc_rms", "fell", "edge_landing_fraction"]
+
+
+def test_margin_reward_share_is_the_margin_terms_part_of_the_episodes_reward() -> None:
+    """Two steps of a margin term of -0.1 and +0.3 (sum 0.2) beside a tracking term of 0.4 per step (sum 0.8) and a
+    penalty of -0.5 per step (sum -1.0): |0.2| / (0.2 + 0.8 + 1.0) = 0.1, whatever the signs."""
+    stats = EpisodeStatistics(num_envs=1, dt=0.02)
+    base = step_info(np.random.default_rng(0))
+    for k, margin_term in enumerate((-0.1, 0.3)):
+        info = {key: value[:1] for key, value in base.items() if not key.startswith("reward_")}
+        info |= {
+            "reward_velocity_tracking": np.array([0.4]),
+            "reward_margin": np.array([margin_term]),
+            "reward_torques": np.array([-0.5]),
+        }
+        out = stats.update(np.array([0.0]), info, np.array([k == 1]), np.array([False]))
+    assert out["margin_reward_share"][0] == pytest.approx(0.1)
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), warmup=st.integers(0, 3))
+def test_accumulated_windows_are_the_means_over_the_episodes_that_ended(seed: int, warmup: int) -> None:
+    """accumulate() on a device's tensors, with no host read, then one drain() per window: each metric's mean over
+    the episodes that ended in the window, where finite; the same as update()'s per-episode values averaged."""
+    from benchmarks.tools.host_reads import DispatchCounter
+
+    rng = np.random.default_rng(seed)
+    host = EpisodeStatistics(N, 0.02, warmup_steps=warmup)
+    device = EpisodeStatistics(N, 0.02, warmup_steps=warmup, reference=torch.zeros(1))
+    for _ in range(3):  # windows
+        ended: dict[str, list[float]] = {}
+        counter = DispatchCounter()
+        for _ in range(9):
+            info, reward = step_info(rng), rng.normal(size=N)
+            terminated, truncated = rng.random(N) < 0.15, rng.random(N) < 0.05
+            for key, values in host.update(reward, info, terminated, truncated).items():
+                ended.setdefault(key, []).extend(values[np.isfinite(values)])
+            on_device = {k: torch.from_numpy(v) for k, v in info.items()}
+            with counter:
+                device.accumulate(
+                    torch.from_numpy(reward), on_device, torch.from_numpy(terminated), torch.from_numpy(truncated)
+                )
+        assert dict(counter.host_reads) == {}
+        drained = device.drain()
+        expected = {key: float(np.mean(values)) for key, values in ended.items() if key != "env" and values}
+        assert drained.keys() == expected.keys()
+        for key, value in expected.items():
+            assert drained[key] == pytest.approx(value, rel=1e-12, abs=1e-12), key
+    assert device.drain() == {}  # nothing ended since

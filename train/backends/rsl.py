@@ -47,7 +47,7 @@ from margin_rl.envs.core import AnymalCore
 from margin_rl.train.config import to_dict
 from margin_rl.train.environments import ACTION_SIZE, AnymalTarget, anymal_config, make_core
 from margin_rl.train.exploration import ExplorationMonitor
-from margin_rl.train.metrics import EpisodeStatistics, step_tags, tensorboard_tags
+from margin_rl.train.metrics import EpisodeStatistics, step_statistics, tensorboard_tags
 from margin_rl.train.runs import (
     TENSORBOARD_DIR,
     TORCHSCRIPT_FILE,
@@ -73,8 +73,23 @@ class RslVecEnv(VecEnv):
         self.cfg: dict[str, Any] = to_dict(core.config)
         self.privileged = bool(core.config.privileged_observations)
         self.stats = EpisodeStatistics(core.num_envs, core.dt, reference=core.episode_step)  # sums where the core is
+        self.log_every = 1
+        """Steps between two reads of the episode and step statistics (and of the core's checks): 1, or the
+        learner's rollout length (:meth:`set_rollout_length`)."""
+        self._steps_logged = 0
+        self._step_sums: Any = None  # the step statistics summed over the window, where the core computes
+        self._step_tags: tuple[str, ...] = ()
         self.core.reset()
         self._obs = self._observations(core.observe_all())
+
+    def set_rollout_length(self, steps: int) -> None:
+        """Read the statistics and the core's checks once per ``steps`` steps (the learner's rollout), not every
+        step: on a device every read waits for the step to finish. The statistics then reach ``extras["log"]`` on
+        a rollout's last step, as their means over the rollout (rsl-rl's logger averages what each step gives)."""
+        if not isinstance(steps, int) or isinstance(steps, bool) or steps < 1:
+            raise ValueError(f"the rollout length must be a whole number of steps >= 1, got {steps!r}")
+        self.log_every = steps
+        self.core.check_every = steps
 
     @property
     def dt(self) -> float:
@@ -126,14 +141,21 @@ class RslVecEnv(VecEnv):
         rewards = self._tensor(out.reward, torch.float32)
         dones = self._tensor(out.terminated | out.truncated)
         time_outs = self._tensor(out.truncated)
-        finished = self.stats.update(out.reward, out.info, out.terminated, out.truncated)
-        log: dict[str, float | torch.Tensor] = dict(step_tags(out.info))
-        for tag, values in tensorboard_tags(finished).items():
-            finite = values[np.isfinite(values)]
-            if finite.size:
-                log[tag] = torch.as_tensor(finite, dtype=torch.float32)
-        extras = {"time_outs": time_outs, "log": log}
+        self.stats.accumulate(out.reward, out.info, out.terminated, out.truncated)
+        self._step_tags, statistics = step_statistics(out.info)
+        self._step_sums = statistics if self._step_sums is None else self._step_sums + statistics
+        self._steps_logged += 1
+        extras = {"time_outs": time_outs, "log": self._drain() if self._steps_logged >= self.log_every else {}}
         return self._obs, rewards, dones, extras
+
+    def _drain(self) -> dict[str, float]:
+        """The window's statistics, read once: the step statistics' means over its steps, and each episode
+        metric's mean over the episodes that ended in it (under their TensorBoard tags)."""
+        means = to_numpy(self._step_sums) / self._steps_logged
+        log = dict(zip(self._step_tags, (float(m) for m in means), strict=True))
+        log.update(tensorboard_tags(self.stats.drain()))
+        self._step_sums, self._steps_logged = None, 0
+        return log
 
 
 def rsl_vec_env(
@@ -222,6 +244,8 @@ class CheckpointingRunner(OnPolicyRunner):
         if update_threads is not None:
             self.alg.update = with_torch_threads(self.alg.update, update_threads)
         self.adapter = env
+        # statistics and the core's checks read once per rollout, on its last step (rsl-rl logs once per iteration)
+        env.set_rollout_length(int(train_cfg["num_steps_per_env"]))
         self.run_dir = run_dir
         self.hooks = hooks
         self.completed_iterations = 0

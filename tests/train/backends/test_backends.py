@@ -108,6 +108,8 @@ def test_episode_statistics_rms_peak_and_warmup() -> None:
             "base_height": np.array([0.40 + 0.03 * k]),
             "touchdowns": np.array([float(k + 1)]),  # 6 touchdowns in the episode
             "edge_touchdowns": np.array([float(k == 1)]),  # one of them on an edge
+            "joint_torque_sq": np.array([[9.0, 16.0, 0.0][k]]),  # mean over the joints of tau^2
+            "torque_at_limit": np.array([float(k == 0)]),  # a joint at its limit on the first step
             "fell": np.array([float(k == 2)]),
             "diverged": np.array([0.0]),
         }
@@ -118,6 +120,8 @@ def test_episode_statistics_rms_peak_and_warmup() -> None:
     assert out["lin_acc_rms"][0] == pytest.approx(np.sqrt((25 + 25) / 2))
     assert out["margin_mean"][0] == pytest.approx(0.0) and out["margin_min"][0] == pytest.approx(-0.1)
     assert out["margin_negative_fraction"][0] == pytest.approx(1 / 3)
+    assert out["torque_rms"][0] == pytest.approx(np.sqrt(25 / 3)) and out["torque_limit_fraction"][0] == 1 / 3
+    assert "margin_reward_share" not in out  # no margin term in this reward
     assert out["base_height_mean"][0] == pytest.approx(0.43)  # every step, warm-up included
     assert out["edge_landing_fraction"][0] == pytest.approx(1 / 6)
     assert out["fell"][0] == 1.0 and out["timed_out"][0] == 0.0 and out["duration_s"][0] == pytest.approx(0.06)

@@ -1,0 +1,73 @@
+"""The checks a step makes on what comes in and goes out, kept as flags where the step computes and read together.
+
+On the host (``mujoco.batch``) a check costs nothing and raises at once. On a device, reading a flag waits for the
+device to finish every operation queued before it: a step that read its checks every time would run at the speed of
+that round trip, and could not be replayed as a graph. There each check ORs its result into per-environment flags
+on the device, and :meth:`StepChecks.raise_pending` reads them all at once (one host read), at a cadence the caller
+sets (:attr:`~margin_rl.envs.core.AnymalCore.check_every`: the learner's rollout length), the same on Warp's CPU
+device as on a GPU. The error then names the check, the first step it failed at (the core's count of steps) and the
+environments.
+
+=====================  ===============================  ==========================================================
+flag                   raised as                        holds where
+=====================  ===============================  ==========================================================
+``action``             ValueError                       an action entry is NaN or inf (the step used 0 there)
+``observation``        FloatingPointError               an observation entry is not finite
+``reward``             FloatingPointError               the reward is not finite
+=====================  ===============================  ==========================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from margin_rl.arrays import namespace, to_numpy
+
+CHECKS: dict[str, type[Exception]] = {
+    "action": ValueError,
+    "observation": FloatingPointError,
+    "reward": FloatingPointError,
+}
+"""The flags, in bit order, and the exception each raises."""
+
+NO_STEP = np.iinfo(np.int64).max
+"""The first-step record of an environment whose flag never held."""
+
+
+class StepChecks:
+    """Per-environment flags of :data:`CHECKS` (bits of an int64), and the first step each environment raised one,
+    kept in arrays of ``reference``'s kind and device."""
+
+    def __init__(self, reference: Any) -> None:
+        xp = self._xp = namespace(reference)
+        n = int(reference.shape[0])
+        device = getattr(reference, "device", None) if xp is not np else None
+        self._bits = xp.zeros(n, dtype=xp.int64, device=device)
+        self._first_step = xp.full(n, NO_STEP, dtype=xp.int64, device=device)
+
+    def record(self, check: str, failed: Any, step: int) -> None:
+        """OR ``failed`` ((N,) bool: where check ``check`` failed) into the flags, remembering ``step`` (the core's
+        count of steps) where it is the environment's first; no host read."""
+        xp, bit = self._xp, 1 << list(CHECKS).index(check)
+        self._bits |= xp.where(failed, bit, 0)
+        first = failed & (self._first_step == NO_STEP)
+        self._first_step[...] = xp.where(first, step, self._first_step)
+
+    def raise_pending(self, hints: Mapping[str, str]) -> None:
+        """Read the flags once; raise the first check that failed (in :data:`CHECKS` order) for the environments
+        it failed in, naming the first step and adding ``hints[check]`` (what to change); clear nothing (a failed
+        environment stays failed)."""
+        both = to_numpy(self._xp.stack([self._bits, self._first_step]))  # the one host read
+        bits, first_step = both[0], both[1]
+        for k, (check, error) in enumerate(CHECKS.items()):
+            envs = np.flatnonzero(bits & (1 << k))
+            if envs.size:
+                step = int(first_step[envs].min())
+                listed = ", ".join(str(e) for e in envs[:8]) + (", ..." if envs.size > 8 else "")
+                raise error(
+                    f"the {check} is not finite in {envs.size} environment(s) [{listed}], first at step {step}"
+                    f"{'; ' + hints[check] if check in hints else ''}"
+                )

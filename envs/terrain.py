@@ -100,7 +100,7 @@ class Terrain:
     resolution: float
     spawn_points: np.ndarray  # (k, 3) flat places to put a robot: x, y, ground height
     levels: int = 0  # curriculum: the spawn points are levels rows of k / levels, row-major; 0: no curriculum
-    _on_device: dict[Any, tuple[Any, Any]] = field(default_factory=dict, init=False, repr=False, compare=False)
+    _on_device: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
@@ -123,6 +123,16 @@ class Terrain:
         if key not in self._on_device:
             heights = None if self.heights is None else like(self.heights, reference)
             self._on_device[key] = (heights, like(self.spawn_points, reference))
+        return self._on_device[key]
+
+    def _constant_like(self, name: str, value: np.ndarray, reference: Any) -> Any:
+        """A small constant array (offsets of the terrain queries) in ``reference``'s kind and on its device, copied
+        there once: a device step builds nothing from host data."""
+        if namespace(reference) is np:
+            return value
+        key = (name, str(reference.device))
+        if key not in self._on_device:
+            self._on_device[key] = like(value, reference)
         return self._on_device[key]
 
     def spawn_points_like(self, reference: Any) -> Any:
@@ -154,8 +164,8 @@ class Terrain:
         if self.heights is None:
             return vertical_normals(xy)
         d = self.resolution
-        ex = xp.asarray([d, 0.0], dtype=xp.float64, device=device_of(xy))
-        ey = xp.asarray([0.0, d], dtype=xp.float64, device=device_of(xy))
+        ex = self._constant_like("normal_dx", np.array([d, 0.0]), xy)
+        ey = self._constant_like("normal_dy", np.array([0.0, d]), xy)
         dx = (self.height(xy + ex) - self.height(xy - ex)) / (2 * d)
         dy = (self.height(xy + ey) - self.height(xy - ey)) / (2 * d)
         n = xp.stack([-dx, -dy, xp.ones_like(dx)], axis=-1)
@@ -170,7 +180,7 @@ class Terrain:
             return xp.zeros(xy.shape[:-1], dtype=xp.float64, device=device_of(xy))
         angles = 2 * math.pi * np.arange(points) / points
         ring = np.concatenate([np.zeros((1, 2)), radius * np.column_stack([np.cos(angles), np.sin(angles)])])
-        samples = self.height(xy[..., None, :] + like(ring, xy))  # (..., points + 1)
+        samples = self.height(xy[..., None, :] + self._constant_like(f"ring_{radius}_{points}", ring, xy))
         return xp.max(samples, axis=-1) - xp.min(samples, axis=-1)
 
 
@@ -178,8 +188,9 @@ def vertical_normals(xy: Any) -> Any:
     """The world's vertical (0, 0, 1) under every point (..., 2): flat ground's normals, float64 (..., 3) in the kind
     and on the device of ``xy``."""
     xp = namespace(xy)
-    up = xp.asarray([0.0, 0.0, 1.0], dtype=xp.float64, device=device_of(xy))
-    return xp.asarray(xp.broadcast_to(up, (*xy.shape[:-1], 3)), copy=True)
+    normals = xp.zeros((*xy.shape[:-1], 3), dtype=xp.float64, device=device_of(xy))
+    normals[..., 2] = 1.0  # a fill on the device, no array from the host
+    return normals
 
 
 STEP_EDGE_RISE = 0.02

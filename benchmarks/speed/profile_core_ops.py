@@ -73,37 +73,50 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def rsl_host_reads(env_id: str, recipe: str, num_envs: int, rollout: int = 8) -> str:
-    """Host reads per environment step in rsl-rl's training loop over the adapter (one iteration of ``rollout``
-    steps, its update included), with rsl-rl's NaN check on and off, beside the adapter's own step."""
+    """Host reads in rsl-rl's training loop over the adapter, one iteration of ``rollout`` steps: per environment step
+    in the rollout (the adapter, the policy, rsl-rl's NaN check and logger) and in the update (once per iteration),
+    with rsl-rl's NaN check on and off; and the adapter's step alone."""
     from rsl_rl.runners import OnPolicyRunner
 
     from margin_rl.train import make_rsl_env
     from margin_rl.train.config import RslPPOConfig
     from margin_rl.train.recipes import get_recipe, with_recipe
+    from margin_rl.train.runs import quiet_stdout
 
-    lines = ["| rsl-rl loop, per environment step | host reads | of them |", "|---|---|---|"]
+    def reads(counter: DispatchCounter) -> int:
+        return sum(counter.host_reads.values())
+
+    lines = [
+        "| rsl-rl's loop (logger on) | host reads per rollout step | in the update, per iteration |",
+        "|---|---|---|",
+    ]
     options = with_recipe(get_recipe(recipe), {})
     for check_for_nan in (True, False):
         env = make_rsl_env(env_id, num_envs, seed=0, physics="warp", physics_device="cpu", **options)
         config = RslPPOConfig(num_steps_per_env=rollout).runner_cfg(False, 50) | {"check_for_nan": check_for_nan}
-        with tempfile.TemporaryDirectory() as logs:
+        with tempfile.TemporaryDirectory() as logs, quiet_stdout(True):
             runner = OnPolicyRunner(env, config, log_dir=logs)
             env.set_rollout_length(rollout)
             runner.learn(num_learning_iterations=1)  # kernels, first rollout
-            counter = DispatchCounter()
-            with counter:
+            total, update = DispatchCounter(), DispatchCounter()
+            learner_update = runner.alg.update
+
+            def counted_update(*args, _update=learner_update, _counter=update, **kwargs):
+                with _counter:
+                    return _update(*args, **kwargs)
+
+            runner.alg.update = counted_update
+            with total:
                 runner.learn(num_learning_iterations=1)
-        reads = sum(counter.host_reads.values()) / rollout
-        lines.append(f"| `check_for_nan={check_for_nan}`, logger on | {reads:.1f} | {dict(counter.host_reads)} |")
+        in_rollout = (reads(total) - reads(update)) / rollout
+        lines.append(f"| `check_for_nan={check_for_nan}` | {in_rollout:.1f} | {reads(update)} |")
     adapter = make_rsl_env(env_id, num_envs, seed=0, physics="warp", physics_device="cpu", **options)
     adapter.set_rollout_length(rollout)
     counter = DispatchCounter()
     with counter:
         for _ in range(rollout):
             adapter.step(torch.zeros(num_envs, 12))
-    lines.append(
-        f"| the adapter's step alone | {sum(counter.host_reads.values()) / rollout:.1f} | {dict(counter.host_reads)} |"
-    )
+    lines.append(f"| the adapter's step alone | {reads(counter) / rollout:.1f} | – |")
     return "\n".join(lines)
 
 

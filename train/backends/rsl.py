@@ -295,11 +295,18 @@ class CheckpointingRunner(OnPolicyRunner):
         }
         return saved
 
+    @property
+    def writes(self) -> bool:
+        """Whether this process writes the run folder: always, but in a distributed run (torchrun) rank 0 alone."""
+        return self.gpu_global_rank == 0
+
     def save(self, path: str, infos: dict | None = None) -> None:
-        """Write ``<run>/checkpoints/ckpt_<steps>.pt`` atomically (the runner's own ``path`` is ignored)."""
+        """Write ``<run>/checkpoints/ckpt_<steps>.pt`` atomically (the runner's own ``path`` is ignored); in a
+        distributed run rank 0 writes it, the others only note where it is."""
         target = checkpoint_path(self.run_dir, self.env_steps, "rsl")
-        state = self.checkpoint_dict()
-        atomic_write(target, lambda f: torch.save(state, f))
+        if self.writes:
+            state = self.checkpoint_dict()
+            atomic_write(target, lambda f: torch.save(state, f))
         self.hooks.checkpointed(target, self.env_steps)
 
     def restore(self, path: Path) -> None:
@@ -312,10 +319,11 @@ class CheckpointingRunner(OnPolicyRunner):
         self.logger.tot_time = float(infos.get("elapsed_s", 0.0))
         torch.set_rng_state(infos["torch_rng_state"])
         env_rng, saved = self.adapter.core.rng, infos["numpy_rng_state"]  # the key predates device generators
-        if isinstance(saved, dict) == isinstance(env_rng, np.random.Generator):
+        if self.writes and isinstance(saved, dict) == isinstance(env_rng, np.random.Generator):
             set_generator_state(env_rng, saved)
-        # else the run was trained on the other kind of physics (host <-> device): the environments' draws start
-        # from this run's seed, as its episodes start fresh
+        # else the run was trained on the other kind of physics (host <-> device), or this process is not rank 0 of
+        # a distributed run (rank 0's generator is the one saved): the environments' draws start from this
+        # process's seed, as its episodes start fresh
         levels = infos.get("curriculum_levels")  # absent in checkpoints written before it was saved
         if levels is not None:
             self.adapter.restart_on_levels(levels)
@@ -404,4 +412,4 @@ def train_rsl(
         return runner.env_steps, True, None
     finally:
         runner.close_writer()
-    return runner.env_steps, False, runner.export_final(final_model)
+    return runner.env_steps, False, runner.export_final(final_model) if runner.writes else None

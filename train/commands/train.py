@@ -65,6 +65,7 @@ from margin_rl.train.config import (
     parse_assignments,
     to_dict,
 )
+from margin_rl.train.distributed import Ranks
 from margin_rl.train.environments import (
     DEFAULT_ENV,
     AnymalTarget,
@@ -385,6 +386,9 @@ def train(
     """
     run_dir = Path(run_dir)
     check_environment(spec)
+    ranks = Ranks.from_environment()
+    if ranks.distributed:
+        spec, physics_device = for_rank(spec, ranks, physics, physics_device)
     checkpoint = latest_checkpoint(run_dir)
     if checkpoint is not None and not resume:
         raise FileExistsError(f"{run_dir} already holds checkpoints; use --resume to continue it, or another --run-dir")
@@ -395,15 +399,18 @@ def train(
     if checkpoint is not None:
         check_same_margin(spec, run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    write_run_config(spec, run_dir, command)
+    if ranks.writes:
+        write_run_config(spec, run_dir, command)
     start = checkpoint_steps(checkpoint) if checkpoint is not None else 0
     stop = stop or StopRequest()
-    bar = _Progress(spec.total_iterations * spec.steps_per_iteration, start, progress, f"{spec.backend} {run_dir.name}")
+    label = f"{spec.backend} {run_dir.name}"
+    bar = _Progress(spec.total_iterations * spec.steps_per_iteration, start, progress and ranks.writes, label)
     latest: list[Path | None] = [checkpoint]
 
     def checkpointed(path: Path, steps: int) -> None:
         latest[0] = path
-        write_json(run_dir / PROGRESS_FILE, {"env_steps": steps, "checkpoint": path.name, "finished": False})
+        if ranks.writes:
+            write_json(run_dir / PROGRESS_FILE, {"env_steps": steps, "checkpoint": path.name, "finished": False})
         if on_checkpoint is not None:
             on_checkpoint(path, steps)
 
@@ -412,11 +419,15 @@ def train(
     try:
         with graceful_stop(stop, verbose=True), torch_threads(threads):
             simulator = PhysicsChoice(physics, physics_device, dict(physics_options or {}))
-            steps, stopped, torchscript = _run_backend(spec, run_dir, checkpoint, hooks, update_threads, simulator)
+            steps, stopped, torchscript = _run_backend(
+                spec, run_dir, checkpoint, hooks, update_threads, simulator, ranks.seed(spec.seed)
+            )
     finally:
         bar.close()
     elapsed = time.perf_counter() - t0
-    final = None if stopped else run_dir / final_model_name(spec.backend)
+    final = None if stopped or not ranks.writes else run_dir / final_model_name(spec.backend)
+    if not ranks.writes:
+        return TrainResult(run_dir, steps, not stopped, stopped, latest[0], None, None, steps - start, elapsed)
     write_json(
         run_dir / PROGRESS_FILE,
         {
@@ -433,6 +444,28 @@ def train(
     return TrainResult(run_dir, steps, not stopped, stopped, latest[0], final, torchscript, steps - start, elapsed)
 
 
+def for_rank(spec: TrainSpec, ranks: Ranks, physics: str, physics_device: str | None) -> tuple[TrainSpec, str]:
+    """The spec and physics device of one of several training processes (:mod:`margin_rl.train.distributed`): the
+    learner and the environments on the process's GPU.
+
+    Raises:
+        ValueError: a backend other than rsl-rl (SB3 has no distributed PPO), physics other than Warp, or a device
+            given that is not the process's GPU.
+    """
+    where = f"training in {ranks.world_size} processes (torchrun)"
+    if spec.backend != "rsl":
+        raise ValueError(f"{where} runs rsl-rl's distributed PPO: use --backend rsl, not {spec.backend!r}")
+    if physics != "warp":
+        raise ValueError(f"{where} puts each process's environments on its GPU: use --physics warp, not {physics!r}")
+    for name, given in (("--physics-device", physics_device), ("--device", spec.device)):
+        if given not in (None, "cpu", "cuda", ranks.device):
+            raise ValueError(
+                f"{where}: process {ranks.rank} runs on {ranks.device} (LOCAL_RANK {ranks.local_rank}); leave "
+                f"{name} out or give cuda, not {given!r}"
+            )
+    return dataclasses.replace(spec, device=ranks.device), ranks.device
+
+
 def _run_backend(
     spec: TrainSpec,
     run_dir: Path,
@@ -440,20 +473,21 @@ def _run_backend(
     hooks: RunHooks,
     update_threads: int | None,
     simulator: PhysicsChoice,
+    seed: int,
 ) -> tuple[int, bool, Any]:
-    """Seed, build the backend's vector environment over the spec's environment on ``simulator``, and hand over to
-    the backend."""
-    torch.manual_seed(spec.seed)
-    np.random.seed(spec.seed % 2**32)
+    """Seed (``seed``: the run's, or a process's own among several), build the backend's vector environment over the
+    spec's environment on ``simulator``, and hand over to the backend."""
+    torch.manual_seed(seed)
+    np.random.seed(seed % 2**32)
     final = run_dir / final_model_name(spec.backend)
     threads = usable_cores() if update_threads is None else update_threads
     learner = {"init_from": spec.init_from, "update_threads": threads}
     if isinstance(spec.ppo, RslPPOConfig):
         # The env's tensors go to the learner's device: with the physics there too (Warp on that GPU), no copy at all.
-        env = rsl_vec_env(spec.target, spec.num_envs, spec.seed, spec.device, *simulator.arguments)
+        env = rsl_vec_env(spec.target, spec.num_envs, seed, spec.device, *simulator.arguments)
         cfg = spec.backend_config(run_dir.name)
         return train_rsl(env, cfg, run_dir, spec.device, spec.total_iterations, checkpoint, hooks, final, **learner)
-    venv = sb3_vec_env(spec.target, spec.num_envs, spec.seed, *simulator.arguments)
+    venv = sb3_vec_env(spec.target, spec.num_envs, seed, *simulator.arguments)
     total = spec.total_iterations * spec.steps_per_iteration
     every = spec.checkpoint_every
     return train_sb3(venv, spec.ppo, run_dir, spec.seed, spec.device, total, every, checkpoint, hooks, final, **learner)

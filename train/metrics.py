@@ -222,14 +222,16 @@ class EpisodeStatistics:
         self._window[1] += xp.sum(xp.astype(counted, xp.float64), axis=1)
         self._reset_where(done)
 
-    def drain(self) -> dict[str, float]:
-        """The mean of each metric over the episodes that ended since the last drain (where finite; metrics no such
-        episode gave are left out), read from the sums in one host read, which start again from zero."""
+    def drain(self) -> dict[str, tuple[float, int]]:
+        """Each metric's (mean, episodes) over the episodes that ended since the last drain, where it was finite
+        (metrics no such episode gave are left out), read from the sums in one host read; the sums start again."""
         if self._window_keys is None:
             return {}
         sums, counts = np.array(to_numpy(self._window))  # a copy: on the CPU to_numpy shares the tensor's memory
         self._window[...] = 0.0
-        return {key: float(sums[k] / counts[k]) for k, key in enumerate(self._window_keys) if counts[k]}
+        return {
+            key: (float(sums[k] / counts[k]), int(counts[k])) for k, key in enumerate(self._window_keys) if counts[k]
+        }
 
     def _add_step(self, reward: Any, info: Mapping[str, Any]) -> None:
         """Add one step of every environment to the running sums."""

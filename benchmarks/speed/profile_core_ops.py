@@ -5,9 +5,9 @@ bounds how fast the core can step whatever the batch size, and every host read s
 GPU benchmark (:func:`benchmarks.speed.bench_gpu.make_core`) on Warp's CPU device, times the step with and without
 its physics, counts the aten operations it dispatches per step, its host reads and random numbers
 (:class:`~benchmarks.tools.host_reads.DispatchCounter`, a ``TorchDispatchMode``: top-level operations, not
-torch.profiler's nested ones), then the host reads per step of rsl-rl's training loop over the adapter::
+torch.profiler's nested ones), and with ``--rsl`` the host reads of rsl-rl's training loop over the adapter::
 
-    python benchmarks/speed/profile_core_ops.py [--num-envs 16] [--steps 20] [--env margin_rl/AnymalC-v1]
+    python benchmarks/speed/profile_core_ops.py [--num-envs 16] [--steps 20] [--env margin_rl/AnymalC-v1] [--rsl]
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--env", default=ROBOT_ID)
     parser.add_argument("--recipe", default=RECIPE)
     parser.add_argument("--top", type=int, default=20, help="operations listed, most frequent first")
+    parser.add_argument("--rsl", action="store_true", help="also count the host reads of rsl-rl's training loop")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     core = make_core(args.num_envs, "cpu", "learned", args.env, args.recipe)
@@ -68,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     print("\n| operation | dispatched per step |\n|---|---|")
     for name, count in counter.ops.most_common(args.top):
         print(f"| `{name}` | {count / args.steps:.0f} |")
-    print("\n" + rsl_host_reads(args.env, args.recipe, args.num_envs))
+    if args.rsl:
+        print("\n" + rsl_host_reads(args.env, args.recipe, args.num_envs))
     return 0
 
 

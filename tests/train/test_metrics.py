@@ -130,8 +130,9 @@ def test_accumulated_windows_are_the_means_over_the_episodes_that_ended(seed: in
                 )
         assert dict(counter.host_reads) == {}
         drained = device.drain()
-        expected = {key: float(np.mean(values)) for key, values in ended.items() if key != "env" and values}
+        expected = {key: values for key, values in ended.items() if key != "env" and values}
         assert drained.keys() == expected.keys()
-        for key, value in expected.items():
-            assert drained[key] == pytest.approx(value, rel=1e-12, abs=1e-12), key
+        for key, values in expected.items():
+            mean, count = drained[key]
+            assert count == len(values) and mean == pytest.approx(np.mean(values), rel=1e-12, abs=1e-12), key
     assert device.drain() == {}  # nothing ended since

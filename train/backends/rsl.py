@@ -148,12 +148,16 @@ class RslVecEnv(VecEnv):
         extras = {"time_outs": time_outs, "log": self._drain() if self._steps_logged >= self.log_every else {}}
         return self._obs, rewards, dones, extras
 
-    def _drain(self) -> dict[str, float]:
-        """The window's statistics, read once: the step statistics' means over its steps, and each episode
-        metric's mean over the episodes that ended in it (under their TensorBoard tags)."""
+    def _drain(self) -> dict[str, float | torch.Tensor]:
+        """The window's statistics, read once: the step statistics' means over its steps, and under their
+        TensorBoard tags each episode metric's mean repeated once per episode that ended in the window (rsl-rl
+        averages everything a rollout's steps logged: so each episode counts once, as when every step logged its
+        own episodes)."""
         means = to_numpy(self._step_sums) / self._steps_logged
-        log = dict(zip(self._step_tags, (float(m) for m in means), strict=True))
-        log.update(tensorboard_tags(self.stats.drain()))
+        log: dict[str, float | torch.Tensor] = dict(zip(self._step_tags, (float(m) for m in means), strict=True))
+        episodes = self.stats.drain()
+        for tag, (mean, count) in tensorboard_tags(episodes).items():
+            log[tag] = torch.full((count,), mean, dtype=torch.float32)
         self._step_sums, self._steps_logged = None, 0
         return log
 

@@ -36,8 +36,10 @@ def test_the_adapter_reads_the_host_once_per_rollout() -> None:
     _, _, _, extras = env.step(actions)  # the rollout's last step: one read of the statistics
     log = extras["log"]
     assert {"Step/margin_mean", "Episode_Termination/timed_out", "Episode_Metrics/lin_acc_rms"} <= log.keys()
-    assert log["Episode_Termination/timed_out"] > 0  # episodes of 15 steps ended in the window
-    assert all(isinstance(value, float) and np.isfinite(value) for value in log.values())
+    timed_out = log["Episode_Termination/timed_out"]  # a value per episode that ended in the window (15 steps long)
+    assert timed_out.shape[0] >= 8 and float(timed_out.mean()) > 0
+    assert isinstance(log["Step/margin_mean"], float)
+    assert all(np.isfinite(np.asarray(value)).all() for value in log.values())
 
 
 def test_a_bad_rollout_length_is_refused() -> None:

@@ -6,7 +6,8 @@ exact resume and stop.
 ``"critic"``; ``num_envs``, ``num_actions``, ``max_episode_length``, a writable ``episode_length_buf`` shared with
 the core, ``device``, ``cfg``; ``step`` returns ``(obs, rewards, dones, extras)`` with ``extras["time_outs"]``
 and ``extras["log"]``: the TensorBoard tags of :class:`~margin_rl.train.metrics.EpisodeStatistics`, the same as
-the SB3 backend's). :func:`make_rsl_env` builds one from a registered id.
+the SB3 backend's, summed where the core computes and read once per rollout, on its last step:
+:meth:`RslVecEnv.set_rollout_length`). :func:`make_rsl_env` builds one from a registered id.
 
 PPO itself is rsl-rl's. :class:`CheckpointingRunner` only changes where and how checkpoints are written
 (``<run>/checkpoints/ckpt_<steps>.pt`` via a temporary file, with the training config, the progress and the
@@ -85,7 +86,7 @@ class RslVecEnv(VecEnv):
     def set_rollout_length(self, steps: int) -> None:
         """Read the statistics and the core's checks once per ``steps`` steps (the learner's rollout), not every
         step: on a device every read waits for the step to finish. The statistics then reach ``extras["log"]`` on
-        a rollout's last step, as their means over the rollout (rsl-rl's logger averages what each step gives)."""
+        a rollout's last step (:meth:`_drain`); the other steps log nothing."""
         if not isinstance(steps, int) or isinstance(steps, bool) or steps < 1:
             raise ValueError(f"the rollout length must be a whole number of steps >= 1, got {steps!r}")
         self.log_every = steps

@@ -174,7 +174,9 @@ def cli_fingerprints(work: Path) -> dict[str, str]:
         for variant in cell.get("variants", {}).values():
             for run in variant.get("runs", []):
                 run["metrics"] = {k: v for k, v in run["metrics"].items() if not NEW_METRIC.match(k)}
-    text = re.sub(r'"[^"]*/bundled/', '"<bundle>/', json.dumps(report, sort_keys=True))
+    # each run's evaluation folder lies under this call's temporary folder (``eval_dir``): where, not what
+    text = json.dumps(report, sort_keys=True).replace(str(work), "<work>")
+    text = re.sub(r'"[^"]*/bundled/', '"<bundle>/', text)
     out["demo/compare.json"] = hashlib.sha256(text.encode()).hexdigest()
     out["demo/compare.md"] = file_digest(work / "demo" / "compare.md")
     from margin_rl.robot import load_robot  # noqa: F401 - fail early if the package is broken

@@ -174,8 +174,10 @@ def cli_fingerprints(work: Path) -> dict[str, str]:
         for variant in cell.get("variants", {}).values():
             for run in variant.get("runs", []):
                 run["metrics"] = {k: v for k, v in run["metrics"].items() if not NEW_METRIC.match(k)}
-    # each run's evaluation folder lies under this call's temporary folder (``eval_dir``): where, not what
+    # each run's evaluation folder (``eval_dir``) lies under this call's temporary folder, named by a digest of the
+    # evaluation's overrides, which hold the bundle's network path: where, not what
     text = json.dumps(report, sort_keys=True).replace(str(work), "<work>")
+    text = re.sub(r"/(eval(?:_grid)?)_[0-9a-f]{8}/", r"/\1_<digest>/", text)
     text = re.sub(r'"[^"]*/bundled/', '"<bundle>/', text)
     out["demo/compare.json"] = hashlib.sha256(text.encode()).hexdigest()
     out["demo/compare.md"] = file_digest(work / "demo" / "compare.md")

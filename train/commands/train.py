@@ -426,21 +426,20 @@ def train(
         bar.close()
     elapsed = time.perf_counter() - t0
     final = None if stopped or not ranks.writes else run_dir / final_model_name(spec.backend)
-    if not ranks.writes:
-        return TrainResult(run_dir, steps, not stopped, stopped, latest[0], None, None, steps - start, elapsed)
-    write_json(
-        run_dir / PROGRESS_FILE,
-        {
-            "env_steps": steps,
-            "checkpoint": latest[0].name if latest[0] is not None else None,
-            "finished": not stopped,
-            "stopped": stopped,
-            "stop_reason": stop.signal_name if stopped else None,
-            "final_model": final.name if final is not None else None,
-            "torchscript": torchscript.name if torchscript is not None else None,
-            "session_steps_per_s": (steps - start) / elapsed if elapsed > 0 else None,
-        },
-    )
+    if ranks.writes:
+        write_json(
+            run_dir / PROGRESS_FILE,
+            {
+                "env_steps": steps,
+                "checkpoint": latest[0].name if latest[0] is not None else None,
+                "finished": not stopped,
+                "stopped": stopped,
+                "stop_reason": stop.signal_name if stopped else None,
+                "final_model": final.name if final is not None else None,
+                "torchscript": torchscript.name if torchscript is not None else None,
+                "session_steps_per_s": (steps - start) / elapsed if elapsed > 0 else None,
+            },
+        )
     return TrainResult(run_dir, steps, not stopped, stopped, latest[0], final, torchscript, steps - start, elapsed)
 
 

@@ -43,10 +43,8 @@ class StepChecks:
 
     def __init__(self, reference: Any) -> None:
         xp = self._xp = namespace(reference)
-        n = int(reference.shape[0])
-        device = getattr(reference, "device", None) if xp is not np else None
-        self._bits = xp.zeros(n, dtype=xp.int64, device=device)
-        self._first_step = xp.full(n, NO_STEP, dtype=xp.int64, device=device)
+        self._bits = xp.zeros_like(reference, dtype=xp.int64)
+        self._first_step = xp.full_like(reference, NO_STEP, dtype=xp.int64)
 
     def record(self, check: str, failed: Any, step: int) -> None:
         """OR ``failed`` ((N,) bool: where check ``check`` failed) into the flags, remembering ``step`` (the core's

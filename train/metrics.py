@@ -49,6 +49,7 @@ import numpy as np
 from array_api_compat import device as device_of
 
 from margin_rl.arrays import like, namespace, to_numpy
+from margin_rl.envs.core import ResetRows
 from margin_rl.envs.terminations import CAUSE_NAMES, info_key
 
 AXES: tuple[str, ...] = ("x", "y", "z")
@@ -155,10 +156,10 @@ class EpisodeStatistics:
 
     def _reset_where(self, done: Any) -> None:
         """Start new episodes where ``done`` ((N,) bool) holds, in place and without a host read."""
-        xp = self._xp
+        rows = ResetRows.where(done)
         for array in self._episode_sums():
-            array[...] = xp.where(xp.reshape(done, (-1,) + (1,) * (array.ndim - 1)), 0, array)
-        self._margin_min[...] = xp.where(done, math.inf, self._margin_min)
+            rows.write(array, 0)
+        rows.write(self._margin_min, math.inf)
 
     def _episode_sums(self) -> tuple[Any, ...]:
         """The per-environment sums an episode starts from zero."""

@@ -40,6 +40,7 @@ episode counters), so that the copy steps to the same numbers as the original.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,6 +69,7 @@ from margin_rl.envs.stability_input import (
     stability_state_from_simulation,
     stance_width,
 )
+from margin_rl.envs.state_read import StateReader
 from margin_rl.envs.step_checks import StepChecks
 from margin_rl.envs.step_data import (
     Accelerations,
@@ -83,9 +85,11 @@ from margin_rl.envs.terrain import (
     flat_terrain,
     next_levels,
     rough_terrain,
+    spread_of_heights,
+    spread_stencil,
     vertical_normals,
 )
-from margin_rl.robot import load_robot, quat_wxyz_to_matrix
+from margin_rl.robot import load_robot
 from margin_rl.robot import mjcf_names as names
 from margin_rl.stability.analytic.lambda_state import LAMBDA_DIM, StabilityState
 
@@ -112,6 +116,23 @@ DIVERGED_SPEED = 1e3
 TORQUE_LIMIT_TOLERANCE = 1e-4
 """A joint whose |torque| is within this share of its actuator's force limit counts as at the limit
 (``info["torque_at_limit"]``): 0.008 N m of ANYmal's 80 N m."""
+
+EPISODE_STATE: dict[str, int] = {
+    "_spawn_xy": 2,  # where the episode started [m], for the curriculum's distance walked
+    "command": 3,  # (v_x [m/s], v_y [m/s], yaw rate [rad/s]), base heading frame
+    "last_action": 12,
+    "_prev_com_vel": 3,  # the last step's velocities, for the finite-difference accelerations
+    "_prev_ang_vel": 3,
+    "_prev_joint_vel": 12,
+    "_com_acc": 3,  # the filtered accelerations [m/s^2], [rad/s^2]
+    "_ang_acc": 3,
+    "_air_time": 4,  # [s] per foot
+    "_push_force": 3,  # the running push [N], and the force of this step (lambda's f_ext)
+    "_push_applied": 3,
+    "_next_push": 1,  # policy steps until the next random push
+    "mu": 1,  # the floor's friction coefficient
+}
+"""The float state of an environment's episode, in the order of its columns (widths)."""
 
 DEVICE_CHECK_STEPS = 24
 """The recipes' rollout length: the cadence the rsl-rl adapter gives a core that computes on a device
@@ -212,23 +233,6 @@ class AnymalCore:
             self._added_mass = self.rng.uniform(*config.randomization.added_base_mass, size=num_envs)
             masses[:, self._base] = self._cast(self.physics.body_mass(self._base) + self._added_mass, masses)
             self.physics.set_const()
-        self.command = zeros(n, 3)
-        self.last_action = zeros(n, 12)
-        self.episode_step = zeros(n, dtype=xp.int64)
-        self._prev_com_vel = zeros(n, 3)
-        self._prev_ang_vel = zeros(n, 3)
-        self._prev_joint_vel = zeros(n, 12)
-        self._com_acc = zeros(n, 3)
-        self._ang_acc = zeros(n, 3)
-        self._air_time = zeros(n, 4)
-        self._prev_contacts = xp.ones((n, 4), dtype=xp.bool, device=self.device)
-        self._push_steps_left = zeros(n, dtype=xp.int64)
-        self._push_force = zeros(n, 3)
-        self._push_applied = zeros(n, 3)
-        self._next_push = xp.full(n, xp.inf, dtype=xp.float64, device=self.device)
-        self._last_margin = zeros(n)
-        self._last_lambda = zeros(n, LAMBDA_DIM)
-        self._spawn_xy = zeros(n, 2)  # where each episode started [m], for the curriculum's distance walked
         self.terrain_level = zeros(n, dtype=xp.int64)  # the curriculum row each environment spawns on (0 without)
         if self.terrain.levels:
             first = self.rng.integers(0, config.terrain_config.initial_max_level + 1, size=n)
@@ -253,7 +257,7 @@ class AnymalCore:
         self.terrain = terrain
         self.model = build_model(self.robot, self.terrain, config.terrain_config)
         self.physics: PhysicsBackend = make_physics(backend.name, self.model, num_envs, backend.device, backend.options)
-        physics, legs = self.physics, self.robot.leg_names
+        physics = self.physics
         # The core computes where the physics' arrays live: numpy on the host beside mujoco.batch, torch tensors on
         # the device beside Warp (margin_rl.arrays), in float64 either way (a device's tensors here are small: its
         # step is bound by kernel launches, not by memory traffic).
@@ -272,15 +276,7 @@ class AnymalCore:
         self.dt = float(physics.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
         self._base = physics.body_id(names.BASE_BODY)
-        self._feet = self._index([physics.site_id(f) for f in self.robot.foot_names])
-        # The shank body's origin is the knee (KFE) joint, the lower end of the thigh whose contact ends an episode.
-        self._knees = self._index([physics.body_id(names.shank_body(leg)) for leg in legs])
-        self._com_sensor = physics.sensor_slice(names.COM_SENSOR)
-        self._com_vel_sensor = physics.sensor_slice(names.COM_VELOCITY_SENSOR)
-        # First entry ("found") of each contact sensor, gathered with one index per step.
-        self._foot_contact_adr = self._index([physics.sensor_adr(names.foot_contact_sensor(leg)) for leg in legs])
-        self._thigh_contact_adr = self._index([physics.sensor_adr(names.thigh_contact_sensor(leg)) for leg in legs])
-        self._base_contact_adr = physics.sensor_adr(names.BASE_CONTACT_SENSOR)
+        self._reader = StateReader(physics, self.robot)
         self._key, key_qpos, key_ctrl = physics.keyframe(names.STANDING_KEYFRAME)
         self._key_qpos, self._key_ctrl = self._array(key_qpos), self._array(key_ctrl)
         self._standing_joint_pos = self._array(self.robot.standing_joint_pos)
@@ -289,7 +285,7 @@ class AnymalCore:
         self._torque_at_limit = self._array((1.0 - TORQUE_LIMIT_TOLERANCE) * self.robot.torque_limits)
         self._floor = physics.geom_id(names.FLOOR_GEOM)
         self._friction = physics.per_env_field("geom_friction")
-        self.mu = self.xp.full(num_envs, physics.geom_friction(self._floor), dtype=self.xp.float64, device=self.device)
+        self._allocate_state()
         self._margin_fn = make_margin_function(config.margin, self.robot, config.margin_weights, MARGIN_CLIP[0])
         self._policy_terms = policy_observations(config.height_scan)
         self.observation_size = sum(t.size for t in self._policy_terms)
@@ -297,6 +293,25 @@ class AnymalCore:
         self._scan_offsets = self._array(np.column_stack([scan, np.zeros(len(scan))]))  # (P, 3) in the heading frame
         self._foot_offsets = self._array(np.array(FOOT_HEIGHT_OFFSETS))  # (9, 2): made once, not a copy per step
         self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
+
+    def _allocate_state(self) -> None:
+        """The per-environment state a step changes, at fixed addresses (what a recorded graph needs): the float
+        quantities of :data:`EPISODE_STATE` as views of one (N, 53) float64 array, the counters of one (N, 2) int64
+        one, so that a reset writes each kind in one operation. Its values: an episode's start (:meth:`_reset_rows`)."""
+        xp, n = self.xp, self.num_envs
+        self._episode_floats = xp.zeros((n, sum(EPISODE_STATE.values())), dtype=xp.float64, device=self.device)
+        start = 0
+        for name, width in EPISODE_STATE.items():
+            view = self._episode_floats[:, start : start + width]
+            setattr(self, name, view if width > 1 else view[:, 0])
+            start += width
+        self.mu[...] = self.physics.geom_friction(self._floor)
+        self._next_push[...] = xp.inf
+        self._episode_counters = xp.zeros((n, 2), dtype=xp.int64, device=self.device)
+        self.episode_step, self._push_steps_left = self._episode_counters[:, 0], self._episode_counters[:, 1]
+        self._prev_contacts = xp.ones((n, 4), dtype=xp.bool, device=self.device)
+        self._last_margin = xp.zeros(n, dtype=xp.float64, device=self.device)
+        self._last_lambda = xp.zeros((n, LAMBDA_DIM), dtype=xp.float64, device=self.device)
 
     # ------------------------------------------------------------------ arrays
     def _array(self, value: Any, dtype: Any = None) -> Any:
@@ -330,11 +345,14 @@ class AnymalCore:
             setup = (*setup, PhysicsChoice(PHYSICS_BACKENDS[0], None, {}))
         self._build(*setup)
         self.physics.set_state(state.pop("_physics"))
-        num_envs = setup[1]  # pickled before the terrain curriculum: no levels, no spawn points kept
+        num_envs = setup[1]  # pickled before the terrain curriculum: no levels (and no spawn points) kept
         state.setdefault("terrain_level", self.xp.zeros(num_envs, dtype=self.xp.int64, device=self.device))
-        state.setdefault("_spawn_xy", self.xp.zeros((num_envs, 2), dtype=self.xp.float64, device=self.device))
+        fixed = {*EPISODE_STATE, "episode_step", "_push_steps_left", "_prev_contacts", "_last_margin", "_last_lambda"}
         for name, value in state.items():
-            setattr(self, name, value)
+            if name in fixed:  # into the buffers at their fixed addresses
+                getattr(self, name)[...] = like(value, getattr(self, name))
+            else:
+                setattr(self, name, value)
 
     BUILD_FIELDS: tuple[str, ...] = (
         "robot", "terrain", "terrain_config", "decimation", "episode_length_s", "margin", "margin_weights",
@@ -374,9 +392,10 @@ class AnymalCore:
             return
         self._reset_rows(ResetRows.at(ids))
 
-    def _reset_rows(self, rows: ResetRows) -> None:
+    def _reset_rows(self, rows: ResetRows) -> SimulationState:
         """Reset the environments of ``rows`` (:class:`ResetRows`: given ids, or a mask over every environment) to a
-        randomised standing state and new commands; the random draws are one per row of ``rows``."""
+        randomised standing state and new commands; the random draws are one per row of ``rows``. Returns the state
+        of the rows read after the reset (what their first observation is made of)."""
         xp = self.xp
         n = rows.count
         cfg, rnd, rng, physics = self.config, self.config.randomization, self.rng, self.physics
@@ -391,7 +410,6 @@ class AnymalCore:
             spawn = spawn_points[tile]
         else:
             spawn = spawn_points[rng.integers(0, spawn_points.shape[0], size=n)]
-        rows.write(self._spawn_xy, spawn[:, :2])
         base_pos = qpos[:, names.BASE_POSITION_QPOS]  # a view: writes go to qpos
         base_pos[:, :2] = spawn[:, :2]
         base_pos[:, 2] = spawn[:, 2] + self._key_qpos[names.BASE_POSITION_QPOS][2] + 0.02  # 2 cm above the ground
@@ -402,25 +420,33 @@ class AnymalCore:
         rows.write(physics.qvel, self._cast(qvel, physics.qvel))
         rows.write(physics.ctrl, self._cast(self._key_ctrl, physics.ctrl))
         rows.write(physics.xfrc_applied, 0.0)
+        mu = self.mu[rows.select]
         if rnd.friction is not None:
-            rows.write(self.mu, rng.uniform(*rnd.friction, size=n))
-            rows.write(self._friction[:, self._floor, 0], self._cast(self.mu[rows.select], self._friction))
+            mu = rng.uniform(*rnd.friction, size=n)
+            rows.write(self._friction[:, self._floor, 0], self._cast(mu, self._friction))
         physics.forward(rows.forward_rows)
         c = cfg.command
         velocities = (c.forward_velocity, c.lateral_velocity, c.yaw_rate)
-        rows.write(self.command, xp.stack([rng.uniform(*bounds, n) for bounds in velocities], axis=1))
-        rows.write(self.last_action, 0.0)
-        rows.write(self.episode_step, 0)
+        command = xp.stack([rng.uniform(*bounds, n) for bounds in velocities], axis=1)
         state = self._read(rows.select)
-        rows.write(self._prev_com_vel, state.com_vel)
-        rows.write(self._prev_ang_vel, state.ang_vel_world)
-        rows.write(self._prev_joint_vel, state.joint_vel)
-        for buffer in (self._com_acc, self._ang_acc, self._air_time, self._push_force, self._push_applied):
-            rows.write(buffer, 0.0)
-        rows.write(self._prev_contacts, True)
-        rows.write(self._push_steps_left, 0)
+        next_push = self._next_push[rows.select]
         if rnd.push_interval_s is not None:
-            rows.write(self._next_push, rng.exponential(rnd.push_interval_s / self.dt, size=n))
+            next_push = rng.exponential(rnd.push_interval_s / self.dt, size=n)
+        start = {  # the episode's first values, in EPISODE_STATE's columns (the rest 0)
+            "_spawn_xy": spawn[:, :2],
+            "command": command,
+            "_prev_com_vel": state.com_vel,
+            "_prev_ang_vel": state.ang_vel_world,
+            "_prev_joint_vel": state.joint_vel,
+            "_next_push": next_push[:, None],
+            "mu": mu[:, None],
+        }
+        zeros = xp.zeros((n, max(EPISODE_STATE.values())), dtype=xp.float64, device=self.device)
+        columns = [start.get(name, zeros[:, :width]) for name, width in EPISODE_STATE.items()]
+        rows.write(self._episode_floats, xp.concat(columns, axis=1))
+        rows.write(self._episode_counters, 0)  # episode_step, push steps left
+        rows.write(self._prev_contacts, True)
+        return state
 
     def restart_on_levels(self, levels: Any) -> None:
         """Start every environment afresh on the terrain curriculum's row ``levels[i]`` (a resumed training's
@@ -467,28 +493,9 @@ class AnymalCore:
         rows.write(self.terrain_level, xp.where(ran, moved, self.terrain_level[ids]))
 
     # ------------------------------------------------------------------ state
-    def _read(self, ids: Any = slice(None)) -> SimulationState:
-        """World-frame state of environments ``ids`` from the batch's live arrays (float64)."""
-        physics, f = self.physics, self._float
-        qpos, qvel, sens = f(physics.qpos[ids]), f(physics.qvel[ids]), f(physics.sensordata[ids])
-        R = quat_wxyz_to_matrix(qpos[:, names.BASE_QUATERNION_QPOS])
-        ang_vel_body = qvel[:, names.BASE_ANGULAR_VELOCITY_QVEL]
-        return SimulationState(
-            base_pos=qpos[:, names.BASE_POSITION_QPOS],
-            base_rot=R,
-            lin_vel_world=qvel[:, names.BASE_LINEAR_VELOCITY_QVEL],
-            ang_vel_body=ang_vel_body,
-            ang_vel_world=self.xp.einsum("nij,nj->ni", R, ang_vel_body),
-            joint_pos=qpos[:, names.JOINT_QPOS],
-            joint_vel=qvel[:, names.JOINT_QVEL],
-            com=sens[:, self._com_sensor],
-            com_vel=sens[:, self._com_vel_sensor],
-            feet=f(physics.site_xpos[ids][:, self._feet]),
-            contacts=sens[:, self._foot_contact_adr] > 0,
-            base_contact=sens[:, self._base_contact_adr] > 0,
-            thigh_contacts=sens[:, self._thigh_contact_adr] > 0,
-            knees=f(physics.xpos[ids][:, self._knees]),
-        )
+    def _read(self, ids: Any = slice(None), finite: bool = False) -> SimulationState:
+        """World-frame state of environments ``ids`` from the physics' live arrays (float64; :mod:`.state_read`)."""
+        return self._reader.read(ids, finite)
 
     # ------------------------------------------------------------------ step
     def step(self, actions: Any) -> StepOutput:
@@ -500,13 +507,14 @@ class AnymalCore:
         diverged = self._simulate()
         self.episode_step += 1
         state = self._measure(diverged)
+        ground = self._ground_heights(state)
         acc = self._estimate_accelerations(state)
-        stability, margin, lam = self._stability(state, acc)
+        stability, margin, lam = self._stability(state, acc, self._contact_normals(state, ground))
         touchdown, air_at_touchdown = self._track_air_time(state.contacts)
-        edge_touchdown = self._edge_touchdowns(state.feet, touchdown)
-        base_height = state.base_pos[:, 2] - self.terrain.height(state.base_pos[:, :2])
+        edge_touchdown = self._edge_touchdowns(touchdown, ground)
+        base_height = state.base_pos[:, 2] - ground["base"]
         values = {
-            **self._policy_values(state, slice(None)),
+            **self._policy_values(state, slice(None), ground.get("scan")),
             "margin": margin,
             "torques": self.xp.astype(self.physics.actuator_force, self.xp.float64),  # a copy
             "action": action,
@@ -520,7 +528,7 @@ class AnymalCore:
         }
         weights = cfg.reward_weights
         if "knee_clearance" in weights:  # a terrain lookup per knee: only when the term is on
-            values["knee_heights"] = state.knees[..., 2] - self.terrain.height(state.knees[..., :2])
+            values["knee_heights"] = state.knees[..., 2] - ground["knees"]
             values["knee_clearance_height"] = self._full(cfg.reward_params.knee_clearance_height)
         if "base_acceleration" in weights:  # the comparison's metric: unfiltered, its norm frame-free
             values["base_lin_acc"] = acc.com_measured
@@ -539,12 +547,11 @@ class AnymalCore:
         final_observation = self.xp.asarray(observation, copy=True)
         done = terminated | truncated
         if self.autoreset and self.sync_free:  # every row reset where done, observed again where done
-            self._reset_rows(ResetRows.where(done))
-            observation = self.xp.where(done[:, None], self._observe_ids(slice(None)), observation)
+            after_reset = self._reset_rows(ResetRows.where(done))
+            observation = self.xp.where(done[:, None], self._observe_state(after_reset, slice(None)), observation)
         elif self.autoreset and bool(self.xp.any(done)):
             ids = self.xp.nonzero(done)[0]
-            self.reset(ids)
-            observation[ids] = self._observe_ids(ids)
+            observation[ids] = self._observe_state(self._reset_rows(ResetRows.at(ids)), ids)
         privileged = self.privileged_observation() if cfg.privileged_observations else None
         self.steps_taken += 1
         if self.sync_free:
@@ -554,13 +561,17 @@ class AnymalCore:
         return StepOutput(observation, reward, terminated, truncated, info, final_observation, privileged)
 
     def _record_output_checks(self, reward: Any, *observations: Any) -> None:
-        """A device step's output checks as flags, read every :attr:`check_every` steps."""
-        xp, step = self.xp, self.steps_taken - 1
-        self._checks.record("reward", ~xp.isfinite(reward), step)
-        bad = xp.zeros(self.num_envs, dtype=xp.bool, device=self.device)
-        for observation in observations:
-            bad = bad | ~xp.all(xp.isfinite(observation), axis=1)
-        self._checks.record("observation", bad, step)
+        """A device step's checks (its actions', and its outputs' finiteness) as flags, read every
+        :attr:`check_every` steps."""
+        xp = self.xp
+        outputs = xp.concat(observations, axis=1)
+        failed = {
+            "action": self._nonfinite_action,
+            # |x| <= the largest finite float: false for NaN and inf alike (isfinite costs four operations in torch)
+            "observation": ~xp.all(xp.abs(outputs) <= xp.finfo(outputs.dtype).max, axis=1),
+            "reward": ~(xp.abs(reward) <= xp.finfo(reward.dtype).max),
+        }
+        self._checks.record(failed, self.steps_taken - 1)
         self._steps_since_check += 1
         if self._steps_since_check >= self.check_every:
             self.raise_pending_errors()
@@ -578,7 +589,7 @@ class AnymalCore:
             raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {tuple(a.shape)}")
         finite = xp.isfinite(a)
         if self.sync_free:  # raised at the next read; 0 in its place keeps the physics finite until then
-            self._checks.record("action", ~xp.all(finite, axis=1), self.steps_taken)
+            self._nonfinite_action = ~xp.all(finite, axis=1)  # recorded with the outputs' checks
             a = xp.where(finite, a, 0.0)
         elif not bool(xp.all(finite)):
             raise ValueError("actions contain NaN or inf")
@@ -590,10 +601,9 @@ class AnymalCore:
     def _invalid_state(self) -> Any:
         """(N,) True where qpos or qvel is non-finite or a velocity exceeds :data:`DIVERGED_SPEED`."""
         xp, qpos, qvel = self.xp, self.physics.qpos, self.physics.qvel
-        return (
-            ~xp.all(xp.isfinite(qvel), axis=1)
-            | xp.any(xp.abs(qvel) > DIVERGED_SPEED, axis=1)
-            | ~xp.all(xp.isfinite(qpos), axis=1)
+        # |x| <= a bound is false for NaN and inf alike: two comparisons cover the three conditions
+        return ~(
+            xp.all(xp.abs(qvel) <= DIVERGED_SPEED, axis=1) & xp.all(xp.abs(qpos) <= xp.finfo(qpos.dtype).max, axis=1)
         )
 
     def _simulate(self) -> np.ndarray:
@@ -630,10 +640,10 @@ class AnymalCore:
         self._checks.raise_pending({"observation": hint, "reward": hint})
         self.physics.check_overflow()
 
-    def _measure(self, diverged: np.ndarray) -> SimulationState:
-        """The state after the step; a diverged environment's numbers are made finite for the bookkeeping."""
-        state = self._read()
-        return state.finite() if self.sync_free or diverged.any() else state
+    def _measure(self, diverged: Any) -> SimulationState:
+        """The state after the step; a diverged environment's numbers are made finite for the bookkeeping (on a
+        device always: whether any diverged is a host read)."""
+        return self._read(finite=self.sync_free or bool(diverged.any()))
 
     def _estimate_accelerations(self, state: SimulationState) -> Accelerations:
         """Finite differences of the velocities over the policy step, the CoM and base ones EMA-filtered."""
@@ -649,7 +659,7 @@ class AnymalCore:
         self._prev_joint_vel[...] = state.joint_vel
         return Accelerations(com_filtered, ang_filtered, joint_acc, com_acc, ang_acc)
 
-    def _stability(self, state: SimulationState, acc: Accelerations) -> tuple[StabilityState, Any, Any]:
+    def _stability(self, state: SimulationState, acc: Accelerations, normals: Any) -> tuple[StabilityState, Any, Any]:
         """lambda's fields, the clipped margin (N,) and lambda (N, 47), one evaluation for the batch (kept as
         :attr:`last_lambda`)."""
         ext_force = self._push_applied
@@ -664,18 +674,49 @@ class AnymalCore:
             state.feet,
             self.mu,
             state.contacts,
-            self._contact_normals(state.feet[..., :2]),
+            normals,
         )
         lam = stability.to_lambda()
         margin = self.xp.clip(self._margin_fn(lam), *MARGIN_CLIP)
         self._last_margin[...], self._last_lambda[...] = margin, lam
         return stability, margin, lam
 
-    def _contact_normals(self, feet_xy: Any) -> Any:
-        """(N, 4, 3) world-frame normals under the feet that lambda carries (:attr:`EnvConfig.margin_normals`)."""
-        if self.config.margin_normals == "vertical":
-            return vertical_normals(feet_xy)
-        return self.terrain.normal(feet_xy)
+    def _ground_heights(self, state: SimulationState) -> dict[str, Any]:
+        """The ground heights [m] a step looks up, in one terrain query (on a device each query is some thirty
+        operations): under the base ("base", (N,)), the knees ("knees", (N, 4): with the knee-clearance term), the
+        feet's normal stencils ("normals", (N, 4, 4)) and soles ("soles", (N, 4, 9)) on rough ground, and the
+        height scan's points ("scan", (N, P))."""
+        xp, n, terrain, cfg = self.xp, self.num_envs, self.terrain, self.config
+        feet_xy = state.feet[..., :2]
+        groups = {"base": ((1,), lambda: state.base_pos[:, None, :2])}  # name: (shape, its points (N, *shape, 2))
+        if "knee_clearance" in cfg.reward_weights:
+            groups["knees"] = ((4,), lambda: state.knees[..., :2])
+        if not terrain.is_flat:
+            if cfg.margin_normals != "vertical":
+                groups["normals"] = ((4, 4), lambda: terrain.normal_stencil(feet_xy))
+            groups["soles"] = ((4, 9), lambda: spread_stencil(feet_xy, self.robot.foot_radius))
+        if cfg.height_scan:
+            groups["scan"] = ((self._scan_offsets.shape[0],), lambda: self._scan_points(state))
+        shapes = {name: shape for name, (shape, _) in groups.items()}
+        if terrain.is_flat:  # the ground is at 0 everywhere: nothing to look up
+            heights = xp.zeros((n, sum(math.prod(s) for s in shapes.values())), dtype=xp.float64, device=self.device)
+        else:
+            points = [xp.reshape(points(), (n, -1, 2)) for _, points in groups.values()]
+            heights = terrain.height(xp.concat(points, axis=1))
+        found, start = {}, 0
+        for name, shape in shapes.items():
+            size = math.prod(shape)
+            found[name] = xp.reshape(heights[:, start : start + size], (n, *shape))
+            start += size
+        found["base"] = found["base"][:, 0]
+        return found
+
+    def _contact_normals(self, state: SimulationState, ground: dict[str, Any]) -> Any:
+        """(N, 4, 3) world-frame normals under the feet that lambda carries (:attr:`EnvConfig.margin_normals`), from
+        the step's ground heights (:meth:`_ground_heights`)."""
+        if "normals" not in ground:  # vertical by choice, or flat ground
+            return vertical_normals(state.feet[..., :2])
+        return self.terrain.normal_from_heights(ground["normals"])
 
     def _track_air_time(self, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Touchdowns (N, 4) and each touching-down foot's time in the air [s] (0 elsewhere).
@@ -690,13 +731,12 @@ class AnymalCore:
         self._prev_contacts[...] = contacts
         return touchdown, air_at_touchdown
 
-    def _edge_touchdowns(self, feet: Any, touchdown: Any) -> Any:
-        """(N, 4) touchdowns on a step edge (:data:`~margin_rl.envs.terrain.STEP_EDGE_RISE`); none on flat ground,
-        where no terrain is looked up."""
+    def _edge_touchdowns(self, touchdown: Any, ground: dict[str, Any]) -> Any:
+        """(N, 4) touchdowns on a step edge (:data:`~margin_rl.envs.terrain.STEP_EDGE_RISE`, the spread of the ground
+        heights under each sole); none on flat ground, where no terrain is looked up."""
         if self.terrain.is_flat:
             return self.xp.zeros_like(touchdown)
-        rough_under_sole = self.terrain.height_spread(feet[..., :2], self.robot.foot_radius) > STEP_EDGE_RISE
-        return touchdown & rough_under_sole
+        return touchdown & (spread_of_heights(ground["soles"]) > STEP_EDGE_RISE)
 
     def _terminations(
         self, state: SimulationState, base_height: np.ndarray, diverged: np.ndarray
@@ -726,33 +766,36 @@ class AnymalCore:
     ) -> dict[str, np.ndarray]:
         """The per-environment step info (every weighted reward term, margin, accelerations, gait, flags)."""
         xp, R = self.xp, state.base_rot
-
-        def flag(value: Any) -> Any:
-            return xp.astype(value, xp.float64)
-
+        # The flags as float64, one conversion for all: fell, diverged, each cause (and the curriculum row).
+        flags = {"fell": values["fell"], "diverged": diverged, **{info_key(name): f for name, f in causes.items()}}
+        as_float = xp.astype(xp.stack(list(flags.values()), axis=1), xp.float64)
+        # Unfiltered: the robot's accelerations, the comparison's metrics (lambda has the filtered ones); base frame.
+        measured = xp.stack([acc.com_measured, acc.base_angular_measured], axis=1)
+        in_base = xp.einsum("nji,nkj->nki", R, measured)
+        torques = values["torques"]
+        feet_flags = xp.astype(
+            xp.stack([state.contacts, values["touchdown"], values["edge_touchdown"]], axis=1), xp.float64
+        )
         return {
             **{f"reward_{k}": v for k, v in terms.items()},
             "margin": margin,
-            # Unfiltered: the robot's accelerations, the comparison's metrics (lambda has the filtered ones).
-            "base_lin_acc": xp.einsum("nji,nj->ni", R, acc.com_measured),  # CoM acceleration, base frame
-            "base_ang_acc": xp.einsum("nji,nj->ni", R, acc.base_angular_measured),  # base frame
+            "base_lin_acc": in_base[:, 0],  # CoM acceleration
+            "base_ang_acc": in_base[:, 1],
             "base_lin_vel": values["base_lin_vel"],
             "velocity_error": xp.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
-            "contacts": flag(state.contacts),
+            "contacts": feet_flags[:, 0],
             "stance_width": stance_width(stability.feet),  # feet in H, as they entered lambda
-            "touchdowns": xp.sum(flag(values["touchdown"]), axis=1),  # feet landing this step
-            "edge_touchdowns": xp.sum(flag(values["edge_touchdown"]), axis=1),  # of them, on a step edge
+            "touchdowns": xp.sum(feet_flags[:, 1], axis=1),  # feet landing this step
+            "edge_touchdowns": xp.sum(feet_flags[:, 2], axis=1),  # of them, on a step edge
             "base_height": values["base_height"],  # base origin above the terrain under it [m]
             # mean over the joints of tau^2 [(N m)^2], and 1 where a joint's actuator is at its force limit (the last
             # physics step's actuator forces)
-            "joint_torque_sq": xp.mean(values["torques"] ** 2, axis=1),
-            "torque_at_limit": flag(xp.any(xp.abs(values["torques"]) >= self._torque_at_limit, axis=1)),
+            "joint_torque_sq": xp.mean(torques**2, axis=1),
+            "torque_at_limit": xp.astype(xp.any(xp.abs(torques) >= self._torque_at_limit, axis=1), xp.float64),
             "lambda": lam,  # (N, 47), the margin's input (names: stability.lambda_names())
-            "fell": flag(values["fell"]),
-            "diverged": flag(diverged),
-            **{info_key(name): flag(flags) for name, flags in causes.items()},
+            **{key: as_float[:, k] for k, key in enumerate(flags)},
             # the curriculum row of the episode (the level it moves to is set at its reset)
-            **({"terrain_level": flag(self.terrain_level)} if self.terrain.levels else {}),
+            **({"terrain_level": xp.astype(self.terrain_level, xp.float64)} if self.terrain.levels else {}),
         }
 
     def push(self, ids: np.ndarray, force: np.ndarray, duration_s: float, frame: str = "world") -> None:
@@ -825,13 +868,15 @@ class AnymalCore:
         noise = self.config.randomization.observation_noise
         return assemble({**values, "last_action": self.last_action}, self._policy_terms, noise, self.rng)
 
-    def _observe_ids(self, ids: np.ndarray) -> np.ndarray:
-        values = {**self._policy_values(self._read(ids), ids), "last_action": self.last_action[ids]}
+    def _observe_state(self, state: SimulationState, ids: Any) -> Any:
+        """Policy observations of environments ``ids`` in ``state`` (their state, read)."""
+        values = {**self._policy_values(state, ids), "last_action": self.last_action[ids]}
         noise = self.config.randomization.observation_noise
         return assemble(values, self._policy_terms, noise, self.rng)
 
-    def _policy_values(self, state: SimulationState, ids: np.ndarray | slice) -> dict[str, np.ndarray]:
-        """The robot-state terms of the observation (and the rewards), from a state read of ``ids``."""
+    def _policy_values(self, state: SimulationState, ids: Any, scan_heights: Any = None) -> dict[str, Any]:
+        """The robot-state terms of the observation (and the rewards), from a state read of ``ids``;
+        ``scan_heights``: the ground under the scan's points where the step looked them up already."""
         R = state.base_rot
         values = {
             "base_lin_vel": self.xp.einsum("nji,nj->ni", R, state.lin_vel_world),  # base frame
@@ -842,18 +887,21 @@ class AnymalCore:
             "joint_vel": state.joint_vel,
         }
         if self.config.height_scan:
-            values["height_scan"] = self._height_scan(state)
+            if scan_heights is None:
+                scan_heights = self.terrain.height(self._scan_points(state))
+            values["height_scan"] = self._height_scan(state, scan_heights)
         return values
 
-    def _height_scan(self, state: SimulationState) -> Any:
-        """(N, P) base height above the terrain at the scan points (:data:`HEIGHT_SCAN_POINTS`, turned with the base's
-        yaw) minus the robot's standing height (the MJCF keyframe's), clipped to +-HEIGHT_SCAN_CLIP [m]."""
-        xp = self.xp
-        points = state.base_pos[:, None, :] + xp.einsum(
-            "nij,pj->npi", heading_rotation(state.base_rot), self._scan_offsets
-        )
-        below = state.base_pos[:, None, 2] - self.terrain.height(points[..., :2]) - self.robot.standing_height
-        return xp.clip(below, -HEIGHT_SCAN_CLIP, HEIGHT_SCAN_CLIP)
+    def _scan_points(self, state: SimulationState) -> Any:
+        """(N, P, 2) the height scan's points (:data:`HEIGHT_SCAN_POINTS` around the base, turned with its yaw) [m]."""
+        turned = self.xp.einsum("nij,pj->npi", heading_rotation(state.base_rot), self._scan_offsets)
+        return (state.base_pos[:, None, :] + turned)[..., :2]
+
+    def _height_scan(self, state: SimulationState, heights: Any) -> Any:
+        """(N, P) base height above the terrain at the scan points (ground ``heights`` (N, P) there) minus the robot's
+        standing height (the MJCF keyframe's), clipped to +-HEIGHT_SCAN_CLIP [m]."""
+        below = state.base_pos[:, None, 2] - heights - self.robot.standing_height
+        return self.xp.clip(below, -HEIGHT_SCAN_CLIP, HEIGHT_SCAN_CLIP)
 
     def observe_all(self) -> np.ndarray:
         """Policy observations of every environment (after :meth:`reset`)."""
@@ -861,13 +909,14 @@ class AnymalCore:
 
     def observe(self, ids: Any) -> Any:
         """Policy observations (len(ids), obs) of environments ``ids`` (e.g. just reset)."""
-        observations = self._observe_ids(self._index(ids))
+        ids = self._index(ids)
+        observations = self._observe_state(self._read(ids), ids)
         check_finite_outputs(self.config, 0.0, observations)
         return observations
 
     def privileged_observation(self) -> np.ndarray:
         """Critic group: terrain heights around the feet, friction and the current margin."""
-        feet = self._float(self.physics.site_xpos[:, self._feet])
+        feet = self._float(self.physics.site_xpos[:, self._reader.feet_sites])
         points = feet[:, :, None, :2] + self._foot_offsets[None, None]
         heights = feet[:, :, None, 2] - self.terrain.height(points)
         values = {

@@ -48,25 +48,24 @@ def stability_state_from_simulation(
     numpy arrays or all torch tensors).
 
     e_g is the third row of the base rotation R_WB; every other vector v is rotated into H as
-    R_WH^T v, and the feet are taken relative to the CoM first.
+    R_WH^T v, and the feet are taken relative to the CoM first: the 13 vectors of an environment in one batched
+    product.
     """
     xp = namespace(base_rotation)
-    R_wh = heading_rotation(base_rotation)
-
-    def to_h(v: Any) -> Any:  # world -> H for (N, 3) or (N, k, 3)
-        return xp.einsum("nji,n...j->n...i", R_wh, v)
-
+    single = xp.stack([com_vel, com_acc, base_ang_acc, ext_force, ext_torque], axis=1)  # (N, 5, 3)
+    vectors = xp.concat([single, feet - com[:, None, :], normals], axis=1)  # (N, 5 + 4 + 4, 3), world frame
+    in_h = xp.einsum("nji,nkj->nki", heading_rotation(base_rotation), vectors)
     return StabilityState(
         gravity_axis=base_rotation[:, 2, :],
-        com_vel=to_h(com_vel),
-        com_acc=to_h(com_acc),
-        base_ang_acc=to_h(base_ang_acc),
-        ext_force=to_h(ext_force),
-        ext_torque=to_h(ext_torque),
-        feet=to_h(feet - com[:, None, :]),
+        com_vel=in_h[:, 0],
+        com_acc=in_h[:, 1],
+        base_ang_acc=in_h[:, 2],
+        ext_force=in_h[:, 3],
+        ext_torque=in_h[:, 4],
+        feet=in_h[:, 5:9],
         mu=xp.astype(xp.asarray(mu), xp.float64),
         contacts=xp.astype(xp.asarray(contacts), xp.float64),
-        normals=to_h(normals),
+        normals=in_h[:, 9:13],
     )
 
 

@@ -38,30 +38,35 @@ NO_STEP = np.iinfo(np.int64).max
 
 
 class StepChecks:
-    """Per-environment flags of :data:`CHECKS` (bits of an int64), and the first step each environment raised one,
+    """Per-environment flags of :data:`CHECKS` ((N, checks) bool), and the first step each environment raised one,
     kept in arrays of ``reference``'s kind and device."""
 
     def __init__(self, reference: Any) -> None:
         xp = self._xp = namespace(reference)
-        self._bits = xp.zeros_like(reference, dtype=xp.int64)
+        self._failed = xp.zeros((reference.shape[0], len(CHECKS)), dtype=xp.bool, device=reference.device)
         self._first_step = xp.full_like(reference, NO_STEP, dtype=xp.int64)
 
-    def record(self, check: str, failed: Any, step: int) -> None:
-        """OR ``failed`` ((N,) bool: where check ``check`` failed) into the flags, remembering ``step`` (the core's
-        count of steps) where it is the environment's first; no host read."""
-        xp, bit = self._xp, 1 << list(CHECKS).index(check)
-        self._bits |= xp.where(failed, bit, 0)
-        first = failed & (self._first_step == NO_STEP)
+    def record(self, failed: Mapping[str, Any], step: int) -> None:
+        """OR one step's failures (``failed[check]``: (N,) bool, where check ``check`` failed, for every check of
+        :data:`CHECKS`) into the flags, remembering ``step`` (the core's count of steps) where it is an environment's
+        first; a few operations for all the checks, and no host read."""
+        xp = self._xp
+        if set(failed) != set(CHECKS):
+            raise ValueError(f"record takes every check of {list(CHECKS)}, got {sorted(failed)}")
+        now = xp.stack([failed[check] for check in CHECKS], axis=1)
+        self._failed |= now
+        first = xp.any(now, axis=1) & (self._first_step == NO_STEP)
         self._first_step[...] = xp.where(first, step, self._first_step)
 
     def raise_pending(self, hints: Mapping[str, str]) -> None:
         """Read the flags once; raise the first check that failed (in :data:`CHECKS` order) for the environments
         it failed in, naming the first step and adding ``hints[check]`` (what to change); clear nothing (a failed
         environment stays failed)."""
-        both = to_numpy(self._xp.stack([self._bits, self._first_step]))  # the one host read
-        bits, first_step = both[0], both[1]
+        xp = self._xp
+        both = to_numpy(xp.concat([xp.astype(self._failed, xp.int64), self._first_step[:, None]], axis=1))  # one read
+        failed, first_step = both[:, :-1], both[:, -1]
         for k, (check, error) in enumerate(CHECKS.items()):
-            envs = np.flatnonzero(bits & (1 << k))
+            envs = np.flatnonzero(failed[:, k])
             if envs.size:
                 step = int(first_step[envs].min())
                 listed = ", ".join(str(e) for e in envs[:8]) + (", ..." if envs.size > 8 else "")

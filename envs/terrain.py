@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import like, namespace
+from margin_rl.arrays import constant, like, namespace
 
 TILE_TYPES: tuple[str, ...] = (
     "flat",
@@ -125,16 +125,6 @@ class Terrain:
             self._on_device[key] = (heights, like(self.spawn_points, reference))
         return self._on_device[key]
 
-    def _constant_like(self, name: str, value: np.ndarray, reference: Any) -> Any:
-        """A small constant array (offsets of the terrain queries) in ``reference``'s kind and on its device, copied
-        there once: a device step builds nothing from host data."""
-        if namespace(reference) is np:
-            return value
-        key = (name, str(reference.device))
-        if key not in self._on_device:
-            self._on_device[key] = like(value, reference)
-        return self._on_device[key]
-
     def spawn_points_like(self, reference: Any) -> Any:
         """:attr:`spawn_points` (k, 3) as an array of ``reference``'s kind and device."""
         return self._arrays_like(reference)[1]
@@ -149,11 +139,17 @@ class Terrain:
             return xp.zeros(xy.shape[:-1], dtype=xp.float64, device=device_of(xy))
         h, _ = self._arrays_like(xy)
         rows, columns = self.heights.shape
-        u = xp.clip((xy[..., 0] - self.origin[0]) / self.resolution, 0, columns - 1.000001)
-        v = xp.clip((xy[..., 1] - self.origin[1]) / self.resolution, 0, rows - 1.000001)
-        c0, r0 = xp.astype(xp.floor(u), xp.int64), xp.astype(xp.floor(v), xp.int64)
-        fu, fv = u - c0, v - r0
-        h00, h01, h10, h11 = h[r0, c0], h[r0, c0 + 1], h[r0 + 1, c0], h[r0 + 1, c0 + 1]
+        # (u, v): the points in grid units (columns, rows), kept inside the grid; (c0, r0) the cell, (fu, fv) the
+        # fractions in it; the cell's four corners gathered from the flat grid at once: 00, 01 (next column),
+        # 10 (next row), 11.
+        first, last = constant(np.zeros(2), xy), constant(np.array([columns - 1.000001, rows - 1.000001]), xy)
+        uv = xp.clip((xy - constant(np.array(self.origin), xy)) / self.resolution, first, last)
+        cell = xp.astype(xp.floor(uv), xp.int64)
+        fraction = uv - cell
+        fu, fv = fraction[..., 0], fraction[..., 1]
+        corner = cell[..., 1] * columns + cell[..., 0]
+        corners = xp.reshape(h, (-1,))[corner[..., None] + constant(np.array([0, 1, columns, columns + 1]), corner)]
+        h00, h01, h10, h11 = (corners[..., k] for k in range(4))
         # Triangle (00, 01, 11) where fu >= fv, triangle (00, 10, 11) elsewhere.
         return xp.where(fu >= fv, h00 + fu * (h01 - h00) + fv * (h11 - h01), h00 + fv * (h10 - h00) + fu * (h11 - h10))
 
@@ -163,11 +159,20 @@ class Terrain:
         xy = xp.astype(xp.asarray(xy), xp.float64, copy=False)
         if self.heights is None:
             return vertical_normals(xy)
+        return self.normal_from_heights(self.height(self.normal_stencil(xy)))
+
+    def normal_stencil(self, xy: Any) -> Any:
+        """The points (..., 4, 2) around points (..., 2) whose heights give the normal there: +-one grid cell along x,
+        then along y (:meth:`normal_from_heights`)."""
         d = self.resolution
-        ex = self._constant_like("normal_dx", np.array([d, 0.0]), xy)
-        ey = self._constant_like("normal_dy", np.array([0.0, d]), xy)
-        dx = (self.height(xy + ex) - self.height(xy - ex)) / (2 * d)
-        dy = (self.height(xy + ey) - self.height(xy - ey)) / (2 * d)
+        offsets = np.array([[d, 0.0], [-d, 0.0], [0.0, d], [0.0, -d]])
+        return xy[..., None, :] + constant(offsets, xy)
+
+    def normal_from_heights(self, heights: Any) -> Any:
+        """Unit normals (..., 3) from the heights (..., 4) at :meth:`normal_stencil`'s points (central differences)."""
+        xp, d = namespace(heights), self.resolution
+        dx = (heights[..., 0] - heights[..., 1]) / (2 * d)
+        dy = (heights[..., 2] - heights[..., 3]) / (2 * d)
         n = xp.stack([-dx, -dy, xp.ones_like(dx)], axis=-1)
         return n / xp.linalg.vector_norm(n, axis=-1, keepdims=True)
 
@@ -178,10 +183,21 @@ class Terrain:
         xy = xp.astype(xp.asarray(xy), xp.float64, copy=False)
         if self.heights is None:
             return xp.zeros(xy.shape[:-1], dtype=xp.float64, device=device_of(xy))
-        angles = 2 * math.pi * np.arange(points) / points
-        ring = np.concatenate([np.zeros((1, 2)), radius * np.column_stack([np.cos(angles), np.sin(angles)])])
-        samples = self.height(xy[..., None, :] + self._constant_like(f"ring_{radius}_{points}", ring, xy))
-        return xp.max(samples, axis=-1) - xp.min(samples, axis=-1)
+        return spread_of_heights(self.height(spread_stencil(xy, radius, points)))
+
+
+def spread_stencil(xy: Any, radius: float, points: int = 8) -> Any:
+    """The centre and ``points`` points on the rim of discs of ``radius`` [m] centred on points (..., 2): (..., 1 +
+    points, 2), whose heights :func:`spread_of_heights` turns into the ground's spread under each disc."""
+    angles = 2 * math.pi * np.arange(points) / points
+    ring = np.concatenate([np.zeros((1, 2)), radius * np.column_stack([np.cos(angles), np.sin(angles)])])
+    return xy[..., None, :] + constant(ring, xy)
+
+
+def spread_of_heights(heights: Any) -> Any:
+    """The highest minus the lowest of the heights (..., k) [m] (at :func:`spread_stencil`'s points)."""
+    xp = namespace(heights)
+    return xp.max(heights, axis=-1) - xp.min(heights, axis=-1)
 
 
 def vertical_normals(xy: Any) -> Any:

@@ -48,6 +48,22 @@ def like(value: Any, reference: Any, dtype: Any = None) -> Any:
     return torch.as_tensor(value, dtype=dtype, device=reference.device)
 
 
+_CONSTANTS: dict[tuple[Any, ...], Any] = {}
+
+
+def constant(values: Any, reference: Any) -> Any:
+    """A small constant array (an index, offsets: numpy or Python ``values``) in ``reference``'s kind and on its
+    device, copied there once per device and kept: a step on a device builds nothing from host data, so it runs
+    with no host-to-device copy and can be recorded as a graph. numpy: ``values`` as an array, as it is."""
+    host = np.asarray(values)
+    if namespace(reference) is np:
+        return host
+    key = (host.dtype.str, host.shape, host.tobytes(), str(reference.device))
+    if key not in _CONSTANTS:
+        _CONSTANTS[key] = like(host, reference)
+    return _CONSTANTS[key]
+
+
 class TorchRandom:
     """The draws the environments make, from a ``torch.Generator`` on a device, under numpy ``Generator``'s names and
     arguments (``uniform``, ``integers``, ``exponential``), so that one piece of code draws on either: the host's

@@ -16,28 +16,42 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from margin_rl.arrays import namespace
+from margin_rl.arrays import constant, namespace
 
 
 class UnreachableFootError(ValueError):
     """A foot target lies outside the leg workspace or needs a joint beyond its limits."""
 
 
+_ROTATION_ENTRIES = np.array([0, 3, 8, 6, 1, 4, 5, 7, 2])
+"""Where R's entries (row-major) sit in [diagonal (3) | above the diagonal (3) | below it (3)] of
+:func:`quat_wxyz_to_matrix`: R00 = d0, R01 = a0, R02 = b2, R10 = b0, R11 = d1, R12 = a1, R20 = a2, R21 = b1,
+R22 = d2."""
+
+
 def quat_wxyz_to_matrix(quat_wxyz: Any) -> Any:
     """Rotation matrices (..., 3, 3) of quaternions (..., 4) given as (w, x, y, z) (normalised here); numpy arrays
-    (and array-likes) or torch tensors (:mod:`margin_rl.arrays`), answered in the same kind."""
+    (and array-likes) or torch tensors (:mod:`margin_rl.arrays`), answered in the same kind.
+
+    With v = (x, y, z) and v', v'' the vector turned cyclically once and twice ((y, z, x), (z, x, y)), the entries
+    are, for i = 0, 1, 2 (indices mod 3)::
+
+        R_ii       = 1 - 2 (v'_i^2 + v''_i^2)
+        R_i,i+1    = 2 (v_i v'_i - w v''_i)
+        R_i+1,i    = 2 (v_i v'_i + w v''_i)
+
+    the textbook entries (e.g. R_01 = 2 (xy - wz)), all nine computed as three vectors: a few operations whatever
+    the batch (each one a kernel launch on a device).
+    """
     xp = namespace(quat_wxyz)
     q = xp.astype(xp.asarray(quat_wxyz), xp.float64, copy=False)
     q = q / xp.linalg.vector_norm(q, axis=-1, keepdims=True)
-    w, x, y, z = (q[..., i] for i in range(4))
-    return xp.stack(
-        [
-            xp.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-            xp.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-            xp.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-        ],
-        axis=-2,
-    )
+    w, v = q[..., :1], q[..., 1:]
+    v1, v2 = xp.roll(v, -1, axis=-1), xp.roll(v, -2, axis=-1)
+    product, turn = v * v1, w * v2
+    entries = xp.concat([1 - 2 * (v1 * v1 + v2 * v2), 2 * (product - turn), 2 * (product + turn)], axis=-1)
+    rows = xp.take(entries, constant(_ROTATION_ENTRIES, entries), axis=-1)  # C order (numpy's [..., idx] is not)
+    return xp.reshape(rows, (*rows.shape[:-1], 3, 3))
 
 
 @dataclass(frozen=True)

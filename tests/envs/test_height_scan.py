@@ -49,7 +49,7 @@ def test_a_step_ahead_of_a_turned_robot_appears_in_the_cells_ahead() -> None:
     core.physics.qpos[0, names.BASE_POSITION_QPOS] = [0.0, 0.0, 0.6]
     core.physics.qpos[0, names.BASE_QUATERNION_QPOS] = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
     core.physics.forward()
-    scan = core._height_scan(core._read())[0]
+    scan = core._policy_values(core._read(), slice(None))["height_scan"][0]
     heading = np.array(HEIGHT_SCAN_POINTS)
     world_y = heading[:, 0]  # facing +y: the heading frame's x axis is the world's y axis
     expected = np.clip(0.6 - np.where(world_y >= 0.25, 0.1, 0.0) - core.robot.standing_height, -1.0, 1.0)
@@ -62,7 +62,7 @@ def test_a_cliff_reads_as_the_clip() -> None:
     core.reset(seed=0)
     core.terrain = Terrain(heights=np.full((81, 81), -5.0), origin=(-2.0, -2.0), resolution=0.05,
                            spawn_points=np.zeros((1, 3)))  # fmt: skip
-    np.testing.assert_allclose(core._height_scan(core._read()), HEIGHT_SCAN_CLIP)
+    np.testing.assert_allclose(core._policy_values(core._read(), slice(None))["height_scan"], HEIGHT_SCAN_CLIP)
 
 
 def test_bad_inputs_name_the_field() -> None:

@@ -68,8 +68,9 @@ def _mirror(source: AnymalCore, target: AnymalCore) -> None:
         value = copy.deepcopy(getattr(source, name))
         if name == "rng":
             value = _HostDrawsAsTensors(value)
-        elif isinstance(value, np.ndarray):
-            value = like(value, target.physics.qpos)
+        elif isinstance(value, np.ndarray):  # into the target's buffer: its state lives at fixed addresses
+            getattr(target, name)[...] = like(value, target.physics.qpos)
+            continue
         setattr(target, name, value)
 
 

@@ -48,7 +48,7 @@ import mujoco
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import like, namespace, random_generator, to_numpy
+from margin_rl.arrays import like, namespace, random_generator, rotate, to_numpy
 from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, make_physics
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.margin_kinds import MARGIN_KINDS, make_margin_function
@@ -771,7 +771,7 @@ class AnymalCore:
         as_float = xp.astype(xp.stack(list(flags.values()), axis=1), xp.float64)
         # Unfiltered: the robot's accelerations, the comparison's metrics (lambda has the filtered ones); base frame.
         measured = xp.stack([acc.com_measured, acc.base_angular_measured], axis=1)
-        in_base = xp.einsum("nji,nkj->nki", R, measured)
+        in_base = rotate(R, measured, inverse=True)
         torques = values["torques"]
         feet_flags = xp.astype(
             xp.stack([state.contacts, values["touchdown"], values["edge_touchdown"]], axis=1), xp.float64
@@ -821,7 +821,7 @@ class AnymalCore:
         if frame not in ("world", "heading"):
             raise ValueError(f"push frame must be 'world' or 'heading', got {frame!r}")
         if frame == "heading":
-            force = self.xp.einsum("nij,nj->ni", heading_rotation(self._read(ids).base_rot), force)
+            force = rotate(heading_rotation(self._read(ids).base_rot), force)
         self._push_force[ids] = force
         self._push_steps_left[ids] = self.push_steps(duration_s)
 
@@ -879,7 +879,7 @@ class AnymalCore:
         ``scan_heights``: the ground under the scan's points where the step looked them up already."""
         R = state.base_rot
         values = {
-            "base_lin_vel": self.xp.einsum("nji,nj->ni", R, state.lin_vel_world),  # base frame
+            "base_lin_vel": rotate(R, state.lin_vel_world, inverse=True),  # base frame
             "base_ang_vel": state.ang_vel_body,
             "projected_gravity": -R[:, 2, :],
             "command": self.command[ids],
@@ -894,7 +894,8 @@ class AnymalCore:
 
     def _scan_points(self, state: SimulationState) -> Any:
         """(N, P, 2) the height scan's points (:data:`HEIGHT_SCAN_POINTS` around the base, turned with its yaw) [m]."""
-        turned = self.xp.einsum("nij,pj->npi", heading_rotation(state.base_rot), self._scan_offsets)
+        offsets = self.xp.broadcast_to(self._scan_offsets, (state.base_pos.shape[0], *self._scan_offsets.shape))
+        turned = rotate(heading_rotation(state.base_rot), offsets)
         return (state.base_pos[:, None, :] + turned)[..., :2]
 
     def _height_scan(self, state: SimulationState, heights: Any) -> Any:

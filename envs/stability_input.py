@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from margin_rl.arrays import namespace
+from margin_rl.arrays import namespace, rotate
 from margin_rl.stability.analytic.lambda_state import StabilityState
 
 
@@ -54,7 +54,7 @@ def stability_state_from_simulation(
     xp = namespace(base_rotation)
     single = xp.stack([com_vel, com_acc, base_ang_acc, ext_force, ext_torque], axis=1)  # (N, 5, 3)
     vectors = xp.concat([single, feet - com[:, None, :], normals], axis=1)  # (N, 5 + 4 + 4, 3), world frame
-    in_h = xp.einsum("nji,nkj->nki", heading_rotation(base_rotation), vectors)
+    in_h = rotate(heading_rotation(base_rotation), vectors, inverse=True)
     return StabilityState(
         gravity_axis=base_rotation[:, 2, :],
         com_vel=in_h[:, 0],

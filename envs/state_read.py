@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from margin_rl.arrays import like, namespace
+from margin_rl.arrays import like, namespace, rotate
 from margin_rl.envs.physics import PhysicsBackend
 from margin_rl.envs.step_data import SimulationState
 from margin_rl.robot import Robot, quat_wxyz_to_matrix
@@ -81,7 +81,7 @@ class StateReader:
         block = xp.astype(xp.concat(sources, axis=1), xp.float64, copy=False)
         R = quat_wxyz_to_matrix(block[:, self._quat])
         ang_vel_body = block[:, self._ang_vel]
-        ang_vel_world = xp.einsum("nij,nj->ni", R, ang_vel_body)
+        ang_vel_world = rotate(R, ang_vel_body)
         if finite:
             block, R, ang_vel_world = (xp.where(xp.isfinite(a), a, 0.0) for a in (block, R, ang_vel_world))
             ang_vel_body = block[:, self._ang_vel]

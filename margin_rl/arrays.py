@@ -48,6 +48,29 @@ def like(value: Any, reference: Any, dtype: Any = None) -> Any:
     return torch.as_tensor(value, dtype=dtype, device=reference.device)
 
 
+def rotate(rotations: Any, vectors: Any, inverse: bool = False) -> Any:
+    """Vectors turned by a batch of rotation matrices: R_n v (``inverse``: R_n^T v), for ``rotations`` (N, 3, 3) and
+    ``vectors`` (N, 3), or (N, k, 3) for k vectors per matrix; the result has ``vectors``' shape.
+
+    One equation, two routes: numpy computes it with ``einsum`` (its numbers, bit for bit, as they always were);
+    torch with one batched product (``bmm``): ``torch.einsum`` dispatches nine views around the same product, and on
+    a device every dispatched operation costs host time.
+    """
+    xp = namespace(rotations, vectors)
+    single = vectors.ndim == 2
+    if xp is np:
+        return (
+            np.einsum("nji,nj->ni" if inverse else "nij,nj->ni", rotations, vectors)
+            if single
+            else np.einsum("nji,nkj->nki" if inverse else "nij,nkj->nki", rotations, vectors)
+        )
+    import torch  # tensors: torch is loaded already
+
+    rows = vectors[:, None, :] if single else vectors  # (N, k, 3): each turned vector is a row, v^T R^T or v^T R
+    turned = torch.bmm(rows, rotations if inverse else rotations.mT)
+    return turned[:, 0] if single else turned
+
+
 _CONSTANTS: dict[tuple[Any, ...], Any] = {}
 
 

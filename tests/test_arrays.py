@@ -12,10 +12,12 @@ from hypothesis import strategies as st
 
 from margin_rl.arrays import (
     TorchRandom,
+    constant,
     generator_state,
     like,
     namespace,
     random_generator,
+    rotate,
     set_generator_state,
     to_numpy,
 )
@@ -81,3 +83,32 @@ def test_torch_draws_are_reproducible_and_survive_pickling_and_checkpoints(seed:
     first_host = host.uniform(size=3)
     set_generator_state(host, saved)
     np.testing.assert_array_equal(host.uniform(size=3), first_host)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 6), st.integers(1, 5), st.booleans(), st.integers(0, 2**32 - 1))
+def test_rotate_is_the_matrix_product_on_numpy_and_on_torch(n: int, k: int, inverse: bool, seed: int) -> None:
+    """R v (R^T v) for one vector or k per matrix, against a Python loop; torch's batched product equals numpy's
+    einsum to rounding, and numpy's answer is einsum's bit for bit."""
+    rng = np.random.default_rng(seed)
+    R, vectors = rng.normal(size=(n, 3, 3)), rng.normal(size=(n, k, 3))
+    for v in (vectors, vectors[:, 0]):
+        expected = np.array(
+            [[(R[i].T if inverse else R[i]) @ w for w in np.atleast_2d(v[i])] for i in range(n)]
+        ).reshape(v.shape)
+        result = rotate(R, v, inverse)
+        assert result.shape == v.shape
+        np.testing.assert_allclose(result, expected, rtol=1e-12, atol=1e-12)
+        subscripts = ("nji" if inverse else "nij") + (",nj->ni" if v.ndim == 2 else ",nkj->nki")
+        assert result.tobytes() == np.einsum(subscripts, R, v).tobytes()
+        on_torch = rotate(torch.as_tensor(R), torch.as_tensor(v), inverse)
+        np.testing.assert_allclose(on_torch.numpy(), expected, rtol=1e-12, atol=1e-12)
+
+
+def test_a_constant_is_made_once_per_device_and_is_numpy_itself_on_the_host() -> None:
+    reference = torch.zeros(2, dtype=torch.float64)
+    first, again = constant(np.array([1, 2, 3]), reference), constant(np.array([1, 2, 3]), reference)
+    assert first is again and first.device == reference.device and first.dtype == torch.int64
+    assert constant(np.array([1.0, 2.0, 3.0]), reference) is not first  # another dtype, another constant
+    host = constant([0.5, 1.5], np.zeros(2))
+    assert isinstance(host, np.ndarray) and host.tolist() == [0.5, 1.5]

@@ -10,6 +10,7 @@ COMMANDS = {
     "evaluate": "margin_rl.train.commands.evaluate",
     "compare": "margin_rl.train.commands.compare",
     "push-recovery": "margin_rl.train.commands.push_recovery",
+    "kernels": "margin_rl.train.commands.kernels",
 }
 """Command name -> the module whose ``main(argv)`` runs it."""
 

@@ -163,3 +163,28 @@ def test_height_spread_is_the_same_on_torch() -> None:
     on_torch = terrain.height_spread(torch.from_numpy(xy), 0.03)
     assert isinstance(on_torch, torch.Tensor)
     np.testing.assert_allclose(on_torch.numpy(), terrain.height_spread(xy, 0.03), rtol=0, atol=1e-12)
+
+
+def test_a_steps_one_terrain_lookup_equals_each_query_made_alone() -> None:
+    """The core looks up every ground height of a step at once (base, knees, the feet's normal stencils and soles,
+    the height scan): each part equals the query made alone, bit for bit."""
+    from margin_rl.envs.config import EnvConfig, RewardParams
+    from margin_rl.envs.core import AnymalCore
+
+    config = EnvConfig(
+        robot="anymal_c", terrain="rough", height_scan=True, reward_params=RewardParams(knee_clearance=0.1)
+    )
+    core = AnymalCore(config, 3, seed=4)
+    core.reset(seed=4)
+    for action in np.random.default_rng(0).uniform(-1, 1, (8, 3, 12)):
+        core.step(action)
+    state = core._read()
+    ground, terrain = core._ground_heights(state), core.terrain
+    feet_xy = state.feet[..., :2]
+    assert set(ground) == {"base", "knees", "normals", "soles", "scan"}
+    np.testing.assert_array_equal(ground["base"], terrain.height(state.base_pos[:, :2]))
+    np.testing.assert_array_equal(ground["knees"], terrain.height(state.knees[..., :2]))
+    np.testing.assert_array_equal(terrain.normal_from_heights(ground["normals"]), terrain.normal(feet_xy))
+    spread = np.max(ground["soles"], axis=-1) - np.min(ground["soles"], axis=-1)
+    np.testing.assert_array_equal(spread, terrain.height_spread(feet_xy, core.robot.foot_radius))
+    np.testing.assert_array_equal(ground["scan"], terrain.height(core._scan_points(state)))

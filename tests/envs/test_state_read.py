@@ -1,0 +1,81 @@
+"""The state a step reads (envs.state_read) against MuJoCo's own data of the same simulation, and the episode state
+kept at fixed addresses (views of two packed arrays) through pickling."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+
+from margin_rl.envs.config import EnvConfig, RandomizationConfig
+from margin_rl.envs.core import EPISODE_STATE, AnymalCore
+from margin_rl.robot import mjcf_names as names
+
+CONFIG = EnvConfig(robot="anymal_c", randomization=RandomizationConfig(push_interval_s=0.1, friction=(0.4, 1.0)))
+
+
+def _walked_core(steps: int = 15) -> AnymalCore:
+    core = AnymalCore(CONFIG, 4, seed=2)
+    core.reset(seed=2)
+    rng = np.random.default_rng(0)
+    for _ in range(steps):
+        core.step(rng.uniform(-1, 1, (4, 12)))
+    return core
+
+
+def test_the_state_read_is_mujocos_data_of_each_environment() -> None:
+    core = _walked_core()
+    state = core._read()
+    model = core.model
+    base = model.body(names.BASE_BODY).id
+    for env in range(core.num_envs):
+        data = core.render_data(env)  # MjData of the environment, forward kinematics done
+        np.testing.assert_allclose(state.base_pos[env], data.qpos[:3], atol=1e-12)
+        np.testing.assert_allclose(state.base_rot[env], data.xmat[base].reshape(3, 3), atol=1e-9)
+        np.testing.assert_allclose(state.ang_vel_world[env], data.xmat[base].reshape(3, 3) @ data.qvel[3:6], atol=1e-9)
+        np.testing.assert_allclose(state.joint_pos[env], data.qpos[7:], atol=1e-12)
+        np.testing.assert_allclose(state.joint_vel[env], data.qvel[6:], atol=1e-12)
+        np.testing.assert_allclose(state.com[env], data.subtree_com[base], atol=1e-9)
+        feet = [data.site_xpos[model.site(f).id] for f in core.robot.foot_names]
+        np.testing.assert_allclose(state.feet[env], feet, atol=1e-9)
+        knees = [data.xpos[model.body(names.shank_body(leg)).id] for leg in core.robot.leg_names]
+        np.testing.assert_allclose(state.knees[env], knees, atol=1e-9)
+        found = [
+            data.sensordata[model.sensor(names.foot_contact_sensor(leg)).adr[0]] > 0 for leg in core.robot.leg_names
+        ]
+        np.testing.assert_array_equal(state.contacts[env], found)
+
+
+def test_a_read_of_some_environments_is_their_rows_and_finite_replaces_only_the_non_finite() -> None:
+    core = _walked_core()
+    every, some = core._read(), core._read(np.array([2, 0]))
+    for field in ("base_pos", "base_rot", "com_vel", "feet", "contacts", "base_contact"):
+        np.testing.assert_array_equal(getattr(some, field), getattr(every, field)[[2, 0]])
+    core.physics.qvel[1, 4] = np.nan  # a diverged environment
+    core.physics.qpos[1, 3] = np.inf  # its orientation too
+    raw, finite = core._read(), core._read(finite=True)
+    assert np.isnan(raw.ang_vel_body[1]).any() and np.isnan(raw.base_rot[1]).any()
+    for field in ("base_pos", "base_rot", "ang_vel_body", "ang_vel_world", "joint_vel", "feet", "com_vel"):
+        value = getattr(finite, field)
+        assert np.isfinite(value).all(), field
+        np.testing.assert_array_equal(value[[0, 2, 3]], getattr(raw, field)[[0, 2, 3]])
+    # each non-finite entry 0, computed from the raw values as for any state
+    np.testing.assert_array_equal(finite.base_rot[1], np.where(np.isfinite(raw.base_rot[1]), raw.base_rot[1], 0.0))
+
+
+def test_the_episode_state_stays_views_of_its_packed_arrays_through_pickling() -> None:
+    core = _walked_core(5)
+    clone = pickle.loads(pickle.dumps(core))
+    for copy_ in (core, clone):
+        for name in (*EPISODE_STATE, "episode_step", "_push_steps_left"):
+            packed = copy_._episode_floats if name in EPISODE_STATE else copy_._episode_counters
+            assert np.shares_memory(getattr(copy_, name), packed), name
+        np.testing.assert_array_equal(copy_.command, core.command)
+    clone.command[...] = 0.25  # a write through the public name reaches the packed row a reset writes
+    start = sum(width for name, width in EPISODE_STATE.items() if list(EPISODE_STATE).index(name) < 1)
+    assert list(EPISODE_STATE)[1] == "command" and (clone._episode_floats[:, start : start + 3] == 0.25).all()
+    np.testing.assert_array_equal(clone.mu, core.mu)
+    actions = np.random.default_rng(1).uniform(-1, 1, (10, 4, 12))
+    clone.command[...] = core.command
+    for action in actions:
+        np.testing.assert_array_equal(core.step(action).observation, clone.step(action).observation)

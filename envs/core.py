@@ -7,31 +7,30 @@ the stability margin once per batch per step, and autoresets finished environmen
 observation is returned separately). Robot names (bodies, sensors, keyframe, the qpos/qvel layout) come from
 :mod:`margin_rl.robot.mjcf_names`.
 
-:meth:`AnymalCore.step` runs these stages, each a method of its own, once per policy step:
+:meth:`AnymalCore.step` runs these stages once per policy step:
 
-1. ``_actuate``: action a in [-1, 1]^12 (clipped; NaN raises) -> position-servo targets
-   ctrl = ctrl_standing + s a (ctrl_standing: the keyframe's equilibrium targets, so a = 0 holds the
-   standing pose); pushes written to the base (xfrc_applied);
-2. ``_simulate``: ``decimation`` physics steps at the MJCF timestep, the backend's buffer check
-   (``check_overflow``: Warp's fixed contact buffers) and the divergence check (:meth:`_invalid_state` before and
-   after the step, and a clock that did not advance);
-3. ``_measure``: the world-frame state (:class:`SimulationState`) from the batch's arrays;
-4. ``_estimate_accelerations``: CoM, base angular and joint accelerations by finite differences over
-   the policy step (20 ms: the mean acceleration over the step, exact on average), the first two
-   smoothed by an exponential filter (``EnvConfig.acceleration_filter``, 0.5 by default);
-5. ``_stability``: lambda (seed 000 eq. 4, :mod:`margin_rl.envs.stability_input`) and the margin of the
-   configured kind (:mod:`margin_rl.envs.margin_kinds`), clipped to :data:`MARGIN_CLIP` (states the
-   kind cannot rate get the lower clip); a push enters lambda as f_ext;
+1. ``_actuate``: action a in [-1, 1]^12 (clipped; NaN raises) -> position-servo targets ctrl = ctrl_standing + s a
+   (the keyframe's equilibrium targets, so a = 0 holds the standing pose); pushes (:mod:`.pushes`) on the base;
+2. ``_simulate``: ``decimation`` physics steps, the backend's buffer check (Warp's fixed contact buffers) and the
+   divergence check (non-finite or runaway state before or after, a clock that did not advance);
+3. ``_measure``: the world-frame state (:mod:`.state_read`), and the ground under the robot in one terrain lookup
+   (:mod:`.ground`);
+4. ``_estimate_accelerations``: CoM, base angular and joint accelerations by finite differences over the 20 ms
+   step (the mean acceleration over it), the first two smoothed by ``EnvConfig.acceleration_filter``;
+5. ``_stability``: lambda (seed 000 eq. 4, :mod:`.stability_input`) and the margin of the configured kind
+   (:mod:`.margin_kinds`) clipped to :data:`MARGIN_CLIP`; a push enters lambda as f_ext;
 6. ``_track_air_time``: touchdowns and the air time of each foot;
-7. rewards (:mod:`margin_rl.envs.rewards`), ``_terminations`` (the named causes of
-   :mod:`margin_rl.envs.terminations`: base or thigh contact, height or tilt bounds, a diverged simulation, each
-   reported as ``info["termination_<cause>"]``) and truncation at the episode length, ``_info``;
-8. observations and the same-step autoreset of finished environments.
+7. rewards (:mod:`.rewards`), terminations (:mod:`.terminations`, each cause in ``info["termination_<cause>"]``),
+   truncation at the episode length, the info (:mod:`.step_info`);
+8. observations and the same-step autoreset of finished environments (:mod:`.reset_rows`).
 
 **Where it computes.** In the kind of its physics' live arrays (:mod:`margin_rl.arrays`): numpy on the host beside
 ``mujoco.batch``, torch tensors on the physics' device beside Warp, float64 either way; its random draws come from a
 generator of the same kind (numpy's, or :class:`~margin_rl.arrays.TorchRandom` on the device), so the two backends
 draw different numbers from one seed. Every method takes numpy or the core's kind and answers in the core's kind.
+On a device the step reads nothing from the host: resets by mask, random draws of a fixed count, state at fixed
+addresses (:mod:`.episode_state`), checks kept as flags and read every :attr:`AnymalCore.check_every` steps
+(:mod:`.step_checks`).
 
 A core pickles (and deep-copies): it is rebuilt from its config and terrain, and given back its state (the
 physics' integration state and per-environment model fields, the random generator, commands, filters, pushes,
@@ -40,34 +39,35 @@ episode counters), so that the copy steps to the same numbers as the original.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 from typing import Any
 
 import mujoco
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import like, namespace, random_generator, rotate, to_numpy
+from margin_rl.arrays import like, namespace, random_generator, rotate
 from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, make_physics
-from margin_rl.envs.config import EnvConfig, RandomizationConfig
-from margin_rl.envs.margin_kinds import MARGIN_KINDS, make_margin_function
+from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.episode_state import EPISODE_COUNTERS, EPISODE_STATE, episode_views
+from margin_rl.envs.ground import GroundQueries
+from margin_rl.envs.margin_kinds import check_margin_runs_on, make_margin_function
 from margin_rl.envs.observations import (
     FOOT_HEIGHT_OFFSETS,
-    HEIGHT_SCAN_CLIP,
     HEIGHT_SCAN_POINTS,
     PRIVILEGED_OBSERVATIONS,
     assemble,
     policy_observations,
+    robot_state_terms,
 )
 from margin_rl.envs.physics import PhysicsBackend
+from margin_rl.envs.pushes import checked_push, push_steps, start_random_pushes
+from margin_rl.envs.reset_rows import ResetRows
 from margin_rl.envs.rewards import compute_rewards
 from margin_rl.envs.scene import build_model
 from margin_rl.envs.stability_input import (
     heading_rotation,
     lambda_from_simulation,
     stability_state_from_simulation,
-    stance_width,
 )
 from margin_rl.envs.state_read import StateReader
 from margin_rl.envs.step_checks import StepChecks
@@ -78,16 +78,14 @@ from margin_rl.envs.step_data import (
     check_finite_outputs,
     finite_output_hint,
 )
-from margin_rl.envs.terminations import any_cause, info_key, termination_causes
+from margin_rl.envs.step_info import step_info
+from margin_rl.envs.terminations import any_cause, termination_causes
 from margin_rl.envs.terrain import (
-    STEP_EDGE_RISE,
     Terrain,
+    checked_levels,
     flat_terrain,
     next_levels,
     rough_terrain,
-    spread_of_heights,
-    spread_stencil,
-    vertical_normals,
 )
 from margin_rl.robot import load_robot
 from margin_rl.robot import mjcf_names as names
@@ -117,76 +115,10 @@ TORQUE_LIMIT_TOLERANCE = 1e-4
 """A joint whose |torque| is within this share of its actuator's force limit counts as at the limit
 (``info["torque_at_limit"]``): 0.008 N m of ANYmal's 80 N m."""
 
-EPISODE_STATE: dict[str, int] = {
-    "_spawn_xy": 2,  # where the episode started [m], for the curriculum's distance walked
-    "command": 3,  # (v_x [m/s], v_y [m/s], yaw rate [rad/s]), base heading frame
-    "last_action": 12,
-    "_prev_com_vel": 3,  # the last step's velocities, for the finite-difference accelerations
-    "_prev_ang_vel": 3,
-    "_prev_joint_vel": 12,
-    "_com_acc": 3,  # the filtered accelerations [m/s^2], [rad/s^2]
-    "_ang_acc": 3,
-    "_air_time": 4,  # [s] per foot
-    "_push_force": 3,  # the running push [N], and the force of this step (lambda's f_ext)
-    "_push_applied": 3,
-    "_next_push": 1,  # policy steps until the next random push
-    "mu": 1,  # the floor's friction coefficient
-}
-"""The float state of an environment's episode, in the order of its columns (widths)."""
 
 DEVICE_CHECK_STEPS = 24
 """The recipes' rollout length: the cadence the rsl-rl adapter gives a core that computes on a device
 (:attr:`AnymalCore.check_every`), so one read of the step's checks per PPO iteration."""
-
-
-@dataclass(frozen=True)
-class ResetRows:
-    """The environments a reset writes, and how: given ids (their rows computed and written by index: the host's
-    resets, and any reset asked for), or a mask (every row computed, written in place where the mask holds: a
-    device step's autoreset, with no host read and the same work and random draws every step)."""
-
-    select: Any  # what reads the rows: the ids, or slice(None)
-    count: int  # rows computed (and random draws per quantity)
-    mask: Any = None  # (N,) bool where written; None: the ids
-
-    @classmethod
-    def at(cls, ids: Any) -> ResetRows:
-        return cls(ids, int(ids.shape[0]))
-
-    @classmethod
-    def where(cls, mask: Any) -> ResetRows:
-        return cls(slice(None), int(mask.shape[0]), mask)
-
-    @property
-    def physics_rows(self) -> Any:
-        """What the physics' reset takes: the ids, or the mask."""
-        return self.select if self.mask is None else self.mask
-
-    @property
-    def forward_rows(self) -> Any:
-        """What the physics' forward pass takes: the ids, or None (every simulation)."""
-        return self.select if self.mask is None else None
-
-    def write(self, target: Any, values: Any) -> None:
-        """``target[rows] = values``, in place (``values``: ``count`` rows, or a scalar)."""
-        if self.mask is None:
-            target[self.select] = values
-            return
-        xp = namespace(target)
-        mask = xp.reshape(self.mask, (self.count,) + (1,) * (target.ndim - 1))
-        target[...] = xp.where(mask, values, target)
-
-
-def check_margin_runs_on(kind: str, physics: str) -> None:
-    """ValueError where margin kind ``kind`` cannot run beside backend ``physics`` (the LP kinds solve on the
-    CPU, per environment: beside Warp they would undo what it is for)."""
-    if physics != PHYSICS_BACKENDS[0] and not MARGIN_KINDS[kind].batched:
-        usable = [name for name, k in MARGIN_KINDS.items() if k.batched]
-        raise ValueError(
-            f"margin={kind!r} solves linear programs on the CPU, one environment at a time, and is not offered with "
-            f"physics={physics!r}; use margin={usable[0]!r} (the learned margin, seed 000 §IV), another of {usable}, "
-            f"or physics={PHYSICS_BACKENDS[0]!r}"
-        )
 
 
 class AnymalCore:
@@ -223,17 +155,15 @@ class AnymalCore:
         self._build(config, num_envs, autoreset, truncate, terrain, backend)
         self.rng = random_generator(seed, self.physics.qpos)
         xp, n = self.xp, num_envs
-
-        def zeros(*shape: int, dtype: Any = xp.float64) -> Any:
-            return xp.zeros(shape, dtype=dtype, device=self.device)
-
-        self._added_mass = zeros(n)
+        self._added_mass = xp.zeros(n, dtype=xp.float64, device=self.device)
         if config.randomization.added_base_mass is not None:
             masses = self.physics.per_env_field("body_mass")
             self._added_mass = self.rng.uniform(*config.randomization.added_base_mass, size=num_envs)
             masses[:, self._base] = self._cast(self.physics.body_mass(self._base) + self._added_mass, masses)
             self.physics.set_const()
-        self.terrain_level = zeros(n, dtype=xp.int64)  # the curriculum row each environment spawns on (0 without)
+        self.terrain_level = xp.zeros(
+            n, dtype=xp.int64, device=self.device
+        )  # the curriculum row each environment spawns on (0 without)
         if self.terrain.levels:
             first = self.rng.integers(0, config.terrain_config.initial_max_level + 1, size=n)
             self.terrain_level = self._index(first)
@@ -291,24 +221,21 @@ class AnymalCore:
         self.observation_size = sum(t.size for t in self._policy_terms)
         scan = np.array(HEIGHT_SCAN_POINTS)
         self._scan_offsets = self._array(np.column_stack([scan, np.zeros(len(scan))]))  # (P, 3) in the heading frame
+        self._ground = GroundQueries(
+            self.terrain, self.robot.foot_radius, self.robot.standing_height, self._scan_offsets
+        )
         self._foot_offsets = self._array(np.array(FOOT_HEIGHT_OFFSETS))  # (9, 2): made once, not a copy per step
         self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
 
     def _allocate_state(self) -> None:
-        """The per-environment state a step changes, at fixed addresses (what a recorded graph needs): the float
-        quantities of :data:`EPISODE_STATE` as views of one (N, 53) float64 array, the counters of one (N, 2) int64
-        one, so that a reset writes each kind in one operation. Its values: an episode's start (:meth:`_reset_rows`)."""
+        """The per-environment state a step changes, at fixed addresses (:mod:`~margin_rl.envs.episode_state`)."""
         xp, n = self.xp, self.num_envs
         self._episode_floats = xp.zeros((n, sum(EPISODE_STATE.values())), dtype=xp.float64, device=self.device)
-        start = 0
-        for name, width in EPISODE_STATE.items():
-            view = self._episode_floats[:, start : start + width]
-            setattr(self, name, view if width > 1 else view[:, 0])
-            start += width
+        self._episode_counters = xp.zeros((n, len(EPISODE_COUNTERS)), dtype=xp.int64, device=self.device)
+        for name, view in episode_views(self._episode_floats, self._episode_counters).items():
+            setattr(self, name, view)
         self.mu[...] = self.physics.geom_friction(self._floor)
         self._next_push[...] = xp.inf
-        self._episode_counters = xp.zeros((n, 2), dtype=xp.int64, device=self.device)
-        self.episode_step, self._push_steps_left = self._episode_counters[:, 0], self._episode_counters[:, 1]
         self._prev_contacts = xp.ones((n, 4), dtype=xp.bool, device=self.device)
         self._last_margin = xp.zeros(n, dtype=xp.float64, device=self.device)
         self._last_lambda = xp.zeros((n, LAMBDA_DIM), dtype=xp.float64, device=self.device)
@@ -347,7 +274,7 @@ class AnymalCore:
         self.physics.set_state(state.pop("_physics"))
         num_envs = setup[1]  # pickled before the terrain curriculum: no levels (and no spawn points) kept
         state.setdefault("terrain_level", self.xp.zeros(num_envs, dtype=self.xp.int64, device=self.device))
-        fixed = {*EPISODE_STATE, "episode_step", "_push_steps_left", "_prev_contacts", "_last_margin", "_last_lambda"}
+        fixed = {*EPISODE_STATE, *EPISODE_COUNTERS, "_prev_contacts", "_last_margin", "_last_lambda"}
         for name, value in state.items():
             if name in fixed:  # into the buffers at their fixed addresses
                 getattr(self, name)[...] = like(value, getattr(self, name))
@@ -457,22 +384,7 @@ class AnymalCore:
         Raises:
             ValueError: the terrain has no curriculum, or ``levels`` has another length or a row outside it.
         """
-        rows = self.terrain.levels
-        if not rows:
-            raise ValueError(
-                "restart_on_levels needs a terrain curriculum (TerrainConfig.curriculum_levels >= 2); this "
-                f"environment's terrain is {self.config.terrain!r} without one"
-            )
-        given = to_numpy(levels)
-        if given.shape != (self.num_envs,) or not np.issubdtype(given.dtype, np.integer):
-            raise ValueError(
-                f"levels: expected {self.num_envs} integers (one per environment), got shape {given.shape} of "
-                f"{given.dtype}; resume with the --num-envs the run was trained with"
-            )
-        if given.size and (given.min() < 0 or given.max() >= rows):
-            raise ValueError(
-                f"levels: rows must lie in 0..{rows - 1} (this curriculum's), got {given.min()}..{given.max()}"
-            )
+        given = checked_levels(levels, self.terrain.levels, self.num_envs, self.config.terrain)
         self.terrain_level[:] = self._index(given)
         self.episode_step[:] = 0  # no episode to judge: every environment keeps the row it is given
         self.reset()
@@ -507,11 +419,11 @@ class AnymalCore:
         diverged = self._simulate()
         self.episode_step += 1
         state = self._measure(diverged)
-        ground = self._ground_heights(state)
+        ground = self._ground.heights(state, cfg)
         acc = self._estimate_accelerations(state)
-        stability, margin, lam = self._stability(state, acc, self._contact_normals(state, ground))
+        stability, margin, lam = self._stability(state, acc, self._ground.contact_normals(state, ground))
         touchdown, air_at_touchdown = self._track_air_time(state.contacts)
-        edge_touchdown = self._edge_touchdowns(touchdown, ground)
+        edge_touchdown = self._ground.edge_touchdowns(touchdown, ground)
         base_height = state.base_pos[:, 2] - ground["base"]
         values = {
             **self._policy_values(state, slice(None), ground.get("scan")),
@@ -542,7 +454,9 @@ class AnymalCore:
         reward, terms = compute_rewards(weights, values, cfg.reward_params.logistic_gain)
         self.last_action[...] = action
         truncated = (self.episode_step >= self.max_episode_steps) & ~terminated & self.truncate
-        info = self._info(state, acc, values, terms, margin, lam, stability, diverged, causes)
+        levels = self.terrain_level if self.terrain.levels else None
+        context = (self.command, self._torque_at_limit, levels)
+        info = step_info(state, acc, values, terms, margin, lam, stability, diverged, causes, *context)
         observation = self._observe(values)
         final_observation = self.xp.asarray(observation, copy=True)
         done = terminated | truncated
@@ -554,27 +468,16 @@ class AnymalCore:
             observation[ids] = self._observe_state(self._reset_rows(ResetRows.at(ids)), ids)
         privileged = self.privileged_observation() if cfg.privileged_observations else None
         self.steps_taken += 1
-        if self.sync_free:
-            self._record_output_checks(reward, observation, final_observation)
+        if self.sync_free:  # flags, read every check_every steps
+            self._checks.record_step(
+                self._nonfinite_action, reward, (observation, final_observation), self.steps_taken - 1
+            )
+            self._steps_since_check += 1
+            if self._steps_since_check >= self.check_every:
+                self.raise_pending_errors()
         else:
             check_finite_outputs(cfg, reward, observation, final_observation)
         return StepOutput(observation, reward, terminated, truncated, info, final_observation, privileged)
-
-    def _record_output_checks(self, reward: Any, *observations: Any) -> None:
-        """A device step's checks (its actions', and its outputs' finiteness) as flags, read every
-        :attr:`check_every` steps."""
-        xp = self.xp
-        outputs = xp.concat(observations, axis=1)
-        failed = {
-            "action": self._nonfinite_action,
-            # |x| <= the largest finite float: false for NaN and inf alike (isfinite costs four operations in torch)
-            "observation": ~xp.all(xp.abs(outputs) <= xp.finfo(outputs.dtype).max, axis=1),
-            "reward": ~(xp.abs(reward) <= xp.finfo(reward.dtype).max),
-        }
-        self._checks.record(failed, self.steps_taken - 1)
-        self._steps_since_check += 1
-        if self._steps_since_check >= self.check_every:
-            self.raise_pending_errors()
 
     def _full(self, value: float) -> Any:
         """(N,) float64 of ``value``."""
@@ -617,18 +520,13 @@ class AnymalCore:
         diverged = self._invalid_state()
         time_before = xp.astype(physics.time, xp.float64)  # a copy
         failed = physics.step(self.config.decimation)
-        self._check_physics()
+        if not self.sync_free:  # on a device with the step's other checks (raise_pending_errors)
+            self.physics.check_overflow()  # dropped contacts would make every later step of a world wrong
         if failed.shape[0]:  # a simulation failed: end its episode, keep the others (Warp reports none)
             diverged[failed] = True
         expected = time_before + self.config.decimation * physics.timestep
         diverged |= xp.abs(self._float(physics.time) - expected) > 0.5 * physics.timestep
         return diverged | self._invalid_state()
-
-    def _check_physics(self) -> None:
-        """The backend's buffer check (dropped contacts would make every later step of a world wrong): every step
-        on the host; on a device with the step's other checks (:meth:`raise_pending_errors`)."""
-        if not self.sync_free:
-            self.physics.check_overflow()
 
     def raise_pending_errors(self) -> None:
         """Read a device step's checks and the physics' buffer flags (the host reads the step defers), and raise
@@ -681,43 +579,6 @@ class AnymalCore:
         self._last_margin[...], self._last_lambda[...] = margin, lam
         return stability, margin, lam
 
-    def _ground_heights(self, state: SimulationState) -> dict[str, Any]:
-        """The ground heights [m] a step looks up, in one terrain query (on a device each query is some thirty
-        operations): under the base ("base", (N,)), the knees ("knees", (N, 4): with the knee-clearance term), the
-        feet's normal stencils ("normals", (N, 4, 4)) and soles ("soles", (N, 4, 9)) on rough ground, and the
-        height scan's points ("scan", (N, P))."""
-        xp, n, terrain, cfg = self.xp, self.num_envs, self.terrain, self.config
-        feet_xy = state.feet[..., :2]
-        groups = {"base": ((1,), lambda: state.base_pos[:, None, :2])}  # name: (shape, its points (N, *shape, 2))
-        if "knee_clearance" in cfg.reward_weights:
-            groups["knees"] = ((4,), lambda: state.knees[..., :2])
-        if not terrain.is_flat:
-            if cfg.margin_normals != "vertical":
-                groups["normals"] = ((4, 4), lambda: terrain.normal_stencil(feet_xy))
-            groups["soles"] = ((4, 9), lambda: spread_stencil(feet_xy, self.robot.foot_radius))
-        if cfg.height_scan:
-            groups["scan"] = ((self._scan_offsets.shape[0],), lambda: self._scan_points(state))
-        shapes = {name: shape for name, (shape, _) in groups.items()}
-        if terrain.is_flat:  # the ground is at 0 everywhere: nothing to look up
-            heights = xp.zeros((n, sum(math.prod(s) for s in shapes.values())), dtype=xp.float64, device=self.device)
-        else:
-            points = [xp.reshape(points(), (n, -1, 2)) for _, points in groups.values()]
-            heights = terrain.height(xp.concat(points, axis=1))
-        found, start = {}, 0
-        for name, shape in shapes.items():
-            size = math.prod(shape)
-            found[name] = xp.reshape(heights[:, start : start + size], (n, *shape))
-            start += size
-        found["base"] = found["base"][:, 0]
-        return found
-
-    def _contact_normals(self, state: SimulationState, ground: dict[str, Any]) -> Any:
-        """(N, 4, 3) world-frame normals under the feet that lambda carries (:attr:`EnvConfig.margin_normals`), from
-        the step's ground heights (:meth:`_ground_heights`)."""
-        if "normals" not in ground:  # vertical by choice, or flat ground
-            return vertical_normals(state.feet[..., :2])
-        return self.terrain.normal_from_heights(ground["normals"])
-
     def _track_air_time(self, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Touchdowns (N, 4) and each touching-down foot's time in the air [s] (0 elsewhere).
 
@@ -730,13 +591,6 @@ class AnymalCore:
         self._air_time[...] = xp.where(contacts, 0.0, self._air_time)
         self._prev_contacts[...] = contacts
         return touchdown, air_at_touchdown
-
-    def _edge_touchdowns(self, touchdown: Any, ground: dict[str, Any]) -> Any:
-        """(N, 4) touchdowns on a step edge (:data:`~margin_rl.envs.terrain.STEP_EDGE_RISE`, the spread of the ground
-        heights under each sole); none on flat ground, where no terrain is looked up."""
-        if self.terrain.is_flat:
-            return self.xp.zeros_like(touchdown)
-        return touchdown & (spread_of_heights(ground["soles"]) > STEP_EDGE_RISE)
 
     def _terminations(
         self, state: SimulationState, base_height: np.ndarray, diverged: np.ndarray
@@ -752,52 +606,6 @@ class AnymalCore:
         }
         return termination_causes(inputs, self.config.termination)
 
-    def _info(
-        self,
-        state: SimulationState,
-        acc: Accelerations,
-        values: dict[str, np.ndarray],
-        terms: dict[str, np.ndarray],
-        margin: np.ndarray,
-        lam: Any,
-        stability: StabilityState,
-        diverged: np.ndarray,
-        causes: dict[str, np.ndarray],
-    ) -> dict[str, np.ndarray]:
-        """The per-environment step info (every weighted reward term, margin, accelerations, gait, flags)."""
-        xp, R = self.xp, state.base_rot
-        # The flags as float64, one conversion for all: fell, diverged, each cause (and the curriculum row).
-        flags = {"fell": values["fell"], "diverged": diverged, **{info_key(name): f for name, f in causes.items()}}
-        as_float = xp.astype(xp.stack(list(flags.values()), axis=1), xp.float64)
-        # Unfiltered: the robot's accelerations, the comparison's metrics (lambda has the filtered ones); base frame.
-        measured = xp.stack([acc.com_measured, acc.base_angular_measured], axis=1)
-        in_base = rotate(R, measured, inverse=True)
-        torques = values["torques"]
-        feet_flags = xp.astype(
-            xp.stack([state.contacts, values["touchdown"], values["edge_touchdown"]], axis=1), xp.float64
-        )
-        return {
-            **{f"reward_{k}": v for k, v in terms.items()},
-            "margin": margin,
-            "base_lin_acc": in_base[:, 0],  # CoM acceleration
-            "base_ang_acc": in_base[:, 1],
-            "base_lin_vel": values["base_lin_vel"],
-            "velocity_error": xp.abs(self.command[:, 0] - values["base_lin_vel"][:, 0]),
-            "contacts": feet_flags[:, 0],
-            "stance_width": stance_width(stability.feet),  # feet in H, as they entered lambda
-            "touchdowns": xp.sum(feet_flags[:, 1], axis=1),  # feet landing this step
-            "edge_touchdowns": xp.sum(feet_flags[:, 2], axis=1),  # of them, on a step edge
-            "base_height": values["base_height"],  # base origin above the terrain under it [m]
-            # mean over the joints of tau^2 [(N m)^2], and 1 where a joint's actuator is at its force limit (the last
-            # physics step's actuator forces)
-            "joint_torque_sq": xp.mean(torques**2, axis=1),
-            "torque_at_limit": xp.astype(xp.any(xp.abs(torques) >= self._torque_at_limit, axis=1), xp.float64),
-            "lambda": lam,  # (N, 47), the margin's input (names: stability.lambda_names())
-            **{key: as_float[:, k] for k, key in enumerate(flags)},
-            # the curriculum row of the episode (the level it moves to is set at its reset)
-            **({"terrain_level": xp.astype(self.terrain_level, xp.float64)} if self.terrain.levels else {}),
-        }
-
     def push(self, ids: np.ndarray, force: np.ndarray, duration_s: float, frame: str = "world") -> None:
         """Push the base of environments ``ids``, from the next step on: a constant force ``force`` (len(ids), 3)
         [N] at the base origin for ``duration_s`` rounded to whole policy steps (at least one), so the impulse is
@@ -809,17 +617,8 @@ class AnymalCore:
             ValueError: ``force`` is not (len(ids), 3) and finite, ``ids`` out of range, duration <= 0 or an
                 unknown frame.
         """
-        ids = np.atleast_1d(np.asarray(to_numpy(ids), dtype=np.int64))
-        force = np.asarray(to_numpy(force), dtype=np.float64)
-        if ids.size and (ids.min() < 0 or ids.max() >= self.num_envs):
-            raise ValueError(f"push ids must lie in [0, {self.num_envs}), got {ids.min()}..{ids.max()}")
-        if force.shape != (len(ids), 3) or not np.all(np.isfinite(force)):
-            raise ValueError(f"push force must be finite with shape (len(ids), 3) = ({len(ids)}, 3), got {force.shape}")
+        ids, force = checked_push(ids, force, duration_s, frame, self.num_envs)
         ids, force = self._index(ids), self._array(force)
-        if not duration_s > 0:
-            raise ValueError(f"push duration_s must be > 0 [s], got {duration_s}")
-        if frame not in ("world", "heading"):
-            raise ValueError(f"push frame must be 'world' or 'heading', got {frame!r}")
         if frame == "heading":
             force = rotate(heading_rotation(self._read(ids).base_rot), force)
         self._push_force[ids] = force
@@ -827,7 +626,7 @@ class AnymalCore:
 
     def push_steps(self, duration_s: float) -> int:
         """Policy steps a push of ``duration_s`` lasts (see :meth:`push`)."""
-        return max(1, round(duration_s / self.dt))
+        return push_steps(duration_s, self.dt)
 
     def _apply_pushes(self) -> None:
         """Write the running pushes (random ones of :class:`RandomizationConfig`, and :meth:`push`) to the base."""
@@ -835,33 +634,14 @@ class AnymalCore:
         xfrc = self.physics.xfrc_applied
         xfrc[:, self._base, :] = 0.0
         if rnd.push_interval_s is not None:
-            self._start_random_pushes(rnd)
+            start_random_pushes(
+                self._next_push, self._push_force, self._push_steps_left, self.rng, rnd, self.dt, self.sync_free
+            )
         active = self._push_steps_left > 0
         # The force of this step, kept for lambda: the counter below already reads 0 during a push's last step.
         self._push_applied[...] = self.xp.where(active[:, None], self._push_force, 0.0)
         xfrc[:, self._base, :3] = self._cast(self._push_applied, xfrc)
         self._push_steps_left[...] = self.xp.clip(self._push_steps_left - 1, min=0)
-
-    def _start_random_pushes(self, rnd: RandomizationConfig) -> None:
-        self._next_push -= 1
-        start = self._next_push <= 0
-        xp = self.xp
-        if self.sync_free:  # a draw per environment every step, used where a push starts: no count to read
-            angle = self.rng.uniform(0, 2 * np.pi, size=self.num_envs)
-            force = rnd.push_force * xp.stack([xp.cos(angle), xp.sin(angle), xp.zeros_like(angle)], axis=1)
-            interval = self.rng.exponential(rnd.push_interval_s / self.dt, size=self.num_envs)
-            self._push_force[...] = xp.where(start[:, None], force, self._push_force)
-            self._push_steps_left[...] = xp.where(start, self.push_steps(rnd.push_duration_s), self._push_steps_left)
-            self._next_push[...] = xp.where(start, interval, self._next_push)
-            return
-        count = int(xp.sum(start))  # the host's numpy draws: as many as pushes start
-        if count:
-            angle = self.rng.uniform(0, 2 * np.pi, size=count)
-            self._push_force[start] = rnd.push_force * xp.stack(
-                [xp.cos(angle), xp.sin(angle), xp.zeros_like(angle)], axis=1
-            )
-            self._push_steps_left[start] = self.push_steps(rnd.push_duration_s)
-            self._next_push[start] = self.rng.exponential(rnd.push_interval_s / self.dt, size=count)
 
     # ------------------------------------------------------------------ observations
     def _observe(self, values: dict[str, np.ndarray]) -> np.ndarray:
@@ -877,32 +657,10 @@ class AnymalCore:
     def _policy_values(self, state: SimulationState, ids: Any, scan_heights: Any = None) -> dict[str, Any]:
         """The robot-state terms of the observation (and the rewards), from a state read of ``ids``;
         ``scan_heights``: the ground under the scan's points where the step looked them up already."""
-        R = state.base_rot
-        values = {
-            "base_lin_vel": rotate(R, state.lin_vel_world, inverse=True),  # base frame
-            "base_ang_vel": state.ang_vel_body,
-            "projected_gravity": -R[:, 2, :],
-            "command": self.command[ids],
-            "joint_pos": state.joint_pos - self._standing_joint_pos,
-            "joint_vel": state.joint_vel,
-        }
+        values = robot_state_terms(state, self.command[ids], self._standing_joint_pos)
         if self.config.height_scan:
-            if scan_heights is None:
-                scan_heights = self.terrain.height(self._scan_points(state))
-            values["height_scan"] = self._height_scan(state, scan_heights)
+            values["height_scan"] = self._ground.height_scan(state, scan_heights)
         return values
-
-    def _scan_points(self, state: SimulationState) -> Any:
-        """(N, P, 2) the height scan's points (:data:`HEIGHT_SCAN_POINTS` around the base, turned with its yaw) [m]."""
-        offsets = self.xp.broadcast_to(self._scan_offsets, (state.base_pos.shape[0], *self._scan_offsets.shape))
-        turned = rotate(heading_rotation(state.base_rot), offsets)
-        return (state.base_pos[:, None, :] + turned)[..., :2]
-
-    def _height_scan(self, state: SimulationState, heights: Any) -> Any:
-        """(N, P) base height above the terrain at the scan points (ground ``heights`` (N, P) there) minus the robot's
-        standing height (the MJCF keyframe's), clipped to +-HEIGHT_SCAN_CLIP [m]."""
-        below = state.base_pos[:, None, 2] - heights - self.robot.standing_height
-        return self.xp.clip(below, -HEIGHT_SCAN_CLIP, HEIGHT_SCAN_CLIP)
 
     def observe_all(self) -> np.ndarray:
         """Policy observations of every environment (after :meth:`reset`)."""
@@ -918,10 +676,8 @@ class AnymalCore:
     def privileged_observation(self) -> np.ndarray:
         """Critic group: terrain heights around the feet, friction and the current margin."""
         feet = self._float(self.physics.site_xpos[:, self._reader.feet_sites])
-        points = feet[:, :, None, :2] + self._foot_offsets[None, None]
-        heights = feet[:, :, None, 2] - self.terrain.height(points)
         values = {
-            "foot_terrain_heights": self.xp.reshape(heights, (self.num_envs, -1)),
+            "foot_terrain_heights": self._ground.heights_around(feet, self._foot_offsets),
             "friction": self.mu[:, None],
             "margin": self._last_margin[:, None],
         }

@@ -23,6 +23,7 @@ from array_api_compat import device as device_of
 from threadpoolctl import ThreadpoolController
 
 from margin_rl.arrays import namespace
+from margin_rl.envs.backends import PHYSICS_BACKENDS
 from margin_rl.robot import Robot
 from margin_rl.stability.learned.model import LearnedMargin
 
@@ -157,3 +158,15 @@ def make_margin_function(kind: str, robot: Robot, weights: str | None, floor: fl
     used by ``"learned"``); ``floor``: the value of states that a per-state criterion cannot rate.
     """
     return MARGIN_KINDS[check_margin_kind(kind)].build(robot, weights, floor)
+
+
+def check_margin_runs_on(kind: str, physics: str) -> None:
+    """ValueError where margin kind ``kind`` cannot run beside backend ``physics`` (the LP kinds solve on the
+    CPU, per environment: beside Warp they would undo what it is for)."""
+    if physics != PHYSICS_BACKENDS[0] and not MARGIN_KINDS[kind].batched:
+        usable = [name for name, k in MARGIN_KINDS.items() if k.batched]
+        raise ValueError(
+            f"margin={kind!r} solves linear programs on the CPU, one environment at a time, and is not offered with "
+            f"physics={physics!r}; use margin={usable[0]!r} (the learned margin, seed 000 §IV), another of {usable}, "
+            f"or physics={PHYSICS_BACKENDS[0]!r}"
+        )

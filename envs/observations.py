@@ -11,9 +11,12 @@ gravity projected into the base frame, joint positions relative to the standing 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from margin_rl.arrays import namespace
+from margin_rl.arrays import namespace, rotate
+
+if TYPE_CHECKING:
+    from margin_rl.envs.step_data import SimulationState
 
 
 @dataclass(frozen=True)
@@ -102,3 +105,17 @@ def assemble(values: dict[str, Any], terms: tuple[ObservationTerm, ...], noise_l
             v = v + rng.uniform(-1.0, 1.0, size=v.shape) * t.noise * noise_level
         parts.append(v * t.scale)
     return xp.astype(xp.concat(parts, axis=1), xp.float32)
+
+
+def robot_state_terms(state: SimulationState, command: Any, standing_joint_pos: Any) -> dict[str, Any]:
+    """The robot-state terms of the policy observation (unscaled, in the frames of :data:`POLICY_OBSERVATIONS`) from a
+    world-frame state, with the environments' commands (N, 3) and the standing keyframe's joint angles (12,)."""
+    R = state.base_rot
+    return {
+        "base_lin_vel": rotate(R, state.lin_vel_world, inverse=True),  # base frame
+        "base_ang_vel": state.ang_vel_body,
+        "projected_gravity": -R[:, 2, :],
+        "command": command,
+        "joint_pos": state.joint_pos - standing_joint_pos,
+        "joint_vel": state.joint_vel,
+    }

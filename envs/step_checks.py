@@ -58,6 +58,19 @@ class StepChecks:
         first = xp.any(now, axis=1) & (self._first_step == NO_STEP)
         self._first_step[...] = xp.where(first, step, self._first_step)
 
+    def record_step(self, action_failed: Any, reward: Any, observations: Any, step: int) -> None:
+        """Record a step's checks: ``action_failed`` (N,) where an action was NaN or inf, and where ``reward`` (N,) or
+        any of ``observations`` (each (N, k)) is not finite."""
+        xp = self._xp
+        outputs = xp.concat(list(observations), axis=1)
+        # |x| <= the largest finite float: false for NaN and inf alike (isfinite dispatches four operations in torch)
+        failed = {
+            "action": action_failed,
+            "observation": ~xp.all(xp.abs(outputs) <= xp.finfo(outputs.dtype).max, axis=1),
+            "reward": ~(xp.abs(reward) <= xp.finfo(reward.dtype).max),
+        }
+        self.record(failed, step)
+
     def raise_pending(self, hints: Mapping[str, str]) -> None:
         """Read the flags once; raise the first check that failed (in :data:`CHECKS` order) for the environments
         it failed in, naming the first step and adding ``hints[check]`` (what to change); clear nothing (a failed

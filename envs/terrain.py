@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import constant, like, namespace
+from margin_rl.arrays import constant, like, namespace, to_numpy
 
 TILE_TYPES: tuple[str, ...] = (
     "flat",
@@ -345,3 +345,27 @@ def _tile(kind: str, m: int, res: float, config: TerrainConfig, rng: np.random.G
     rim = RIM_CELLS
     out[:rim, :], out[-rim:, :], out[:, :rim], out[:, -rim:] = 0.0, 0.0, 0.0, 0.0
     return out
+
+
+def checked_levels(levels: Any, rows: int, num_envs: int, terrain: str) -> np.ndarray:
+    """``levels`` (a list, numpy or a tensor on any device) as numpy integers: one curriculum row per environment.
+
+    Raises:
+        ValueError: no curriculum (``rows`` 0), not ``num_envs`` integers, or a row outside 0 .. ``rows`` - 1.
+    """
+    if not rows:
+        raise ValueError(
+            "restart_on_levels needs a terrain curriculum (TerrainConfig.curriculum_levels >= 2); this "
+            f"environment's terrain is {terrain!r} without one"
+        )
+    given = to_numpy(levels)
+    if given.shape != (num_envs,) or not np.issubdtype(given.dtype, np.integer):
+        raise ValueError(
+            f"levels: expected {num_envs} integers (one per environment), got shape {given.shape} of "
+            f"{given.dtype}; resume with the --num-envs the run was trained with"
+        )
+    if given.size and (given.min() < 0 or given.max() >= rows):
+        raise ValueError(
+            f"levels: rows must lie in 0..{rows - 1} (this curriculum's), got {given.min()}..{given.max()}"
+        )
+    return given

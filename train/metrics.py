@@ -49,7 +49,7 @@ import numpy as np
 from array_api_compat import device as device_of
 
 from margin_rl.arrays import like, namespace, to_numpy
-from margin_rl.envs.core import ResetRows
+from margin_rl.envs.reset_rows import ResetRows
 from margin_rl.envs.terminations import CAUSE_NAMES, info_key
 
 AXES: tuple[str, ...] = ("x", "y", "z")

@@ -8,7 +8,8 @@ import pickle
 import numpy as np
 
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
-from margin_rl.envs.core import EPISODE_STATE, AnymalCore
+from margin_rl.envs.core import AnymalCore
+from margin_rl.envs.episode_state import EPISODE_STATE
 from margin_rl.robot import mjcf_names as names
 
 CONFIG = EnvConfig(robot="anymal_c", randomization=RandomizationConfig(push_interval_s=0.1, friction=(0.4, 1.0)))

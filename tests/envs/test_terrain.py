@@ -179,7 +179,7 @@ def test_a_steps_one_terrain_lookup_equals_each_query_made_alone() -> None:
     for action in np.random.default_rng(0).uniform(-1, 1, (8, 3, 12)):
         core.step(action)
     state = core._read()
-    ground, terrain = core._ground_heights(state), core.terrain
+    ground, terrain = core._ground.heights(state, core.config), core.terrain
     feet_xy = state.feet[..., :2]
     assert set(ground) == {"base", "knees", "normals", "soles", "scan"}
     np.testing.assert_array_equal(ground["base"], terrain.height(state.base_pos[:, :2]))
@@ -187,4 +187,4 @@ def test_a_steps_one_terrain_lookup_equals_each_query_made_alone() -> None:
     np.testing.assert_array_equal(terrain.normal_from_heights(ground["normals"]), terrain.normal(feet_xy))
     spread = np.max(ground["soles"], axis=-1) - np.min(ground["soles"], axis=-1)
     np.testing.assert_array_equal(spread, terrain.height_spread(feet_xy, core.robot.foot_radius))
-    np.testing.assert_array_equal(ground["scan"], terrain.height(core._scan_points(state)))
+    np.testing.assert_array_equal(ground["scan"], terrain.height(core._ground.scan_points(state)))

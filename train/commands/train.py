@@ -48,7 +48,7 @@ from tqdm import tqdm
 
 from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice
 from margin_rl.envs.config import EnvConfig
-from margin_rl.envs.core import check_margin_runs_on
+from margin_rl.envs.margin_kinds import check_margin_runs_on
 from margin_rl.envs.physics import usable_cores
 from margin_rl.provenance import sha256_file
 from margin_rl.train.backends.rsl import rsl_vec_env, train_rsl

@@ -1,0 +1,38 @@
+"""An environment's episode state in the core, at fixed addresses: the float quantities of :data:`EPISODE_STATE` as
+views of one (N, 53) float64 array, the two counters of one (N, 2) int64 array. A reset writes each array in one
+operation (by index on the host, by mask on a device), and a recorded graph replays on the same memory every step."""
+
+from __future__ import annotations
+
+from typing import Any
+
+EPISODE_STATE: dict[str, int] = {
+    "_spawn_xy": 2,  # where the episode started [m], for the curriculum's distance walked
+    "command": 3,  # (v_x [m/s], v_y [m/s], yaw rate [rad/s]), base heading frame
+    "last_action": 12,
+    "_prev_com_vel": 3,  # the last step's velocities, for the finite-difference accelerations
+    "_prev_ang_vel": 3,
+    "_prev_joint_vel": 12,
+    "_com_acc": 3,  # the filtered accelerations [m/s^2], [rad/s^2]
+    "_ang_acc": 3,
+    "_air_time": 4,  # [s] per foot
+    "_push_force": 3,  # the running push [N], and the force of this step (lambda's f_ext)
+    "_push_applied": 3,
+    "_next_push": 1,  # policy steps until the next random push
+    "mu": 1,  # the floor's friction coefficient
+}
+"""The float state of an environment's episode, in the order of its columns (widths)."""
+
+EPISODE_COUNTERS: tuple[str, ...] = ("episode_step", "_push_steps_left")
+"""The int64 counters: steps since the episode started, steps left of the running push."""
+
+
+def episode_views(floats: Any, counters: Any) -> dict[str, Any]:
+    """Name -> its view: the columns of ``floats`` (N, 53) in :data:`EPISODE_STATE`'s order (a width of one as
+    (N,)), and of ``counters`` (N, 2) in :data:`EPISODE_COUNTERS`'."""
+    views, start = {}, 0
+    for name, width in EPISODE_STATE.items():
+        view = floats[:, start : start + width]
+        views[name] = view if width > 1 else view[:, 0]
+        start += width
+    return views | {name: counters[:, k] for k, name in enumerate(EPISODE_COUNTERS)}

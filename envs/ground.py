@@ -1,0 +1,102 @@
+"""What a step asks of the terrain under the robot, in one lookup: the ground under the base, the knees, the feet's
+normal stencils and soles, the height scan's points (:class:`GroundQueries`). On a device every terrain lookup is some
+thirty operations (kernel launches from Python), whatever the number of points, so a step gathers all its points,
+looks them up once and splits the heights; each part equals the query made alone, bit for bit (a height is computed
+point by point)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from margin_rl.arrays import namespace, rotate
+from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.observations import HEIGHT_SCAN_CLIP
+from margin_rl.envs.stability_input import heading_rotation
+from margin_rl.envs.step_data import SimulationState
+from margin_rl.envs.terrain import (
+    STEP_EDGE_RISE,
+    Terrain,
+    spread_of_heights,
+    spread_stencil,
+    vertical_normals,
+)
+
+
+@dataclass(frozen=True)
+class GroundQueries:
+    """The terrain lookups of a step (module docstring); ``scan_offsets`` (P, 3): the height scan's points in the
+    heading frame, an array of the core's kind."""
+
+    terrain: Terrain
+    foot_radius: float  # [m], the sole disc an edge touchdown is judged on
+    standing_height: float  # [m], the height scan's zero
+    scan_offsets: Any
+
+    def heights(self, state: SimulationState, config: EnvConfig) -> dict[str, Any]:
+        """The ground heights [m] the step of ``config`` looks up: under the base ("base", (N,)), the knees
+        ("knees", (N, 4): with the knee-clearance term), the feet's normal stencils ("normals", (N, 4, 4): with
+        terrain normals in lambda) and soles ("soles", (N, 4, 9)) on rough ground, and the height scan's points
+        ("scan", (N, P): with the scan)."""
+        xp, terrain = namespace(state.base_pos), self.terrain
+        n = int(state.base_pos.shape[0])
+        feet_xy = state.feet[..., :2]
+        groups = {"base": ((1,), lambda: state.base_pos[:, None, :2])}  # name: (shape, its points (N, *shape, 2))
+        if "knee_clearance" in config.reward_weights:
+            groups["knees"] = ((4,), lambda: state.knees[..., :2])
+        if not terrain.is_flat:
+            if config.margin_normals != "vertical":
+                groups["normals"] = ((4, 4), lambda: terrain.normal_stencil(feet_xy))
+            groups["soles"] = ((4, 9), lambda: spread_stencil(feet_xy, self.foot_radius))
+        if config.height_scan:
+            groups["scan"] = ((self.scan_offsets.shape[0],), lambda: self.scan_points(state))
+        shapes = {name: shape for name, (shape, _) in groups.items()}
+        if terrain.is_flat:  # the ground is at 0 everywhere: nothing to look up
+            total = sum(math.prod(shape) for shape in shapes.values())
+            heights = xp.zeros((n, total), dtype=xp.float64, device=state.base_pos.device)
+        else:
+            points = [xp.reshape(points(), (n, -1, 2)) for _, points in groups.values()]
+            heights = terrain.height(xp.concat(points, axis=1))
+        found, start = {}, 0
+        for name, shape in shapes.items():
+            size = math.prod(shape)
+            found[name] = xp.reshape(heights[:, start : start + size], (n, *shape))
+            start += size
+        found["base"] = found["base"][:, 0]
+        return found
+
+    def scan_points(self, state: SimulationState) -> Any:
+        """(N, P, 2) the height scan's points (around the base, turned with its yaw) [m]."""
+        xp, n = namespace(state.base_pos), int(state.base_pos.shape[0])
+        offsets = xp.broadcast_to(self.scan_offsets, (n, *self.scan_offsets.shape))
+        return (state.base_pos[:, None, :] + rotate(heading_rotation(state.base_rot), offsets))[..., :2]
+
+    def height_scan(self, state: SimulationState, heights: Any = None) -> Any:
+        """(N, P) base height above the terrain at the scan points (``heights`` (N, P) the ground there, looked up
+        here if None) minus the robot's standing height, clipped to +-HEIGHT_SCAN_CLIP [m]."""
+        if heights is None:
+            heights = self.terrain.height(self.scan_points(state))
+        below = state.base_pos[:, None, 2] - heights - self.standing_height
+        return namespace(below).clip(below, -HEIGHT_SCAN_CLIP, HEIGHT_SCAN_CLIP)
+
+    def heights_around(self, points: Any, offsets: Any) -> Any:
+        """(N, k K) the height of ``points`` (N, k, 3) above the ground at each of ``offsets`` (K, 2) [m] around them
+        (the critic's terrain around the feet)."""
+        around = points[:, :, None, :2] + offsets[None, None]
+        heights = points[:, :, None, 2] - self.terrain.height(around)
+        return namespace(heights).reshape(heights, (int(points.shape[0]), -1))
+
+    def contact_normals(self, state: SimulationState, ground: dict[str, Any]) -> Any:
+        """(N, 4, 3) world-frame normals under the feet (the terrain's, from the step's ``ground`` heights, or
+        vertical where it looked none up: vertical by choice, or flat ground)."""
+        if "normals" not in ground:
+            return vertical_normals(state.feet[..., :2])
+        return self.terrain.normal_from_heights(ground["normals"])
+
+    def edge_touchdowns(self, touchdown: Any, ground: dict[str, Any]) -> Any:
+        """(N, 4) touchdowns on a step edge: the ground under the sole spreads by more than STEP_EDGE_RISE; none on
+        flat ground."""
+        if "soles" not in ground:
+            return namespace(touchdown).zeros_like(touchdown)
+        return touchdown & (spread_of_heights(ground["soles"]) > STEP_EDGE_RISE)

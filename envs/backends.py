@@ -50,24 +50,36 @@ def make_physics(
         ValueError: an unknown backend or device. TypeError: an option the backend does not take.
         ImportError: ``"warp"`` without MuJoCo Warp installed (the message says how to install it).
     """
+    backend = check_physics_choice(name, device, options)
+    arguments = {} if name == "mujoco" else {"device": device}
+    return backend(model, num_envs, **arguments, **dict(options or {}))
+
+
+def check_physics_choice(name: str, device: str | None, options: Mapping[str, Any] | None) -> type:
+    """The backend class of ``name``, once ``device`` and the names of ``options`` are known to suit it (what
+    :func:`make_physics` takes; checked before a run writes anything).
+
+    Raises:
+        ValueError: an unknown backend or device. TypeError: an option the backend does not take.
+        ImportError: ``"warp"`` without MuJoCo Warp installed (the message says how to install it).
+    """
     if name not in PHYSICS_BACKENDS:
         raise ValueError(f"physics must be one of {list(PHYSICS_BACKENDS)}, got {name!r}")
-    options = dict(options or {})
     if name == "mujoco":
         if device not in (None, "cpu"):
             raise ValueError(
                 f"physics='mujoco' runs on the CPU, got physics_device={device!r}; use physics='warp' for a GPU"
             )
         backend: type = MujocoBatchPhysics
-        arguments: dict[str, Any] = {}
     else:
-        from margin_rl.envs.physics_warp import WarpPhysics  # the optional gpu extra, loaded only when asked for
+        from margin_rl.envs.physics_warp import WarpPhysics, check_warp_device  # the optional gpu extra
 
-        backend, arguments = WarpPhysics, {"device": device}
+        check_warp_device(device)
+        backend = WarpPhysics
     accepted = [
         p for p in inspect.signature(backend.__init__).parameters if p not in ("self", "model", "num_envs", "device")
     ]
-    unknown = sorted(set(options) - set(accepted))
+    unknown = sorted(set(options or {}) - set(accepted))
     if unknown:
         raise TypeError(f"physics_options {unknown} are not settings of physics={name!r}; it takes {accepted}")
-    return backend(model, num_envs, **arguments, **options)
+    return backend

@@ -45,7 +45,7 @@ import mujoco
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import like, namespace, random_generator, rotate
+from margin_rl.arrays import Array, like, namespace, random_generator, rotate
 from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, make_physics
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.episode_state import EPISODE_COUNTERS, EPISODE_STATE, episode_views
@@ -306,7 +306,7 @@ class AnymalCore:
         self.config = config
 
     # ------------------------------------------------------------------ reset
-    def reset(self, ids: np.ndarray | None = None, seed: int | None = None) -> None:
+    def reset(self, ids: Array | None = None, seed: int | None = None) -> None:
         """Reset environments ``ids`` (all if None) to a randomised standing state and new commands.
 
         ``seed`` (optional) first reseeds the generator behind every random draw of the core (resets,
@@ -509,7 +509,7 @@ class AnymalCore:
             xp.all(xp.abs(qvel) <= DIVERGED_SPEED, axis=1) & xp.all(xp.abs(qpos) <= xp.finfo(qpos.dtype).max, axis=1)
         )
 
-    def _simulate(self) -> np.ndarray:
+    def _simulate(self) -> Array:
         """Step the physics ``decimation`` times; returns the (N,) divergence flags.
 
         A state that was already invalid before the step (e.g. written by a user) is flagged too. MuJoCo resets
@@ -579,7 +579,7 @@ class AnymalCore:
         self._last_margin[...], self._last_lambda[...] = margin, lam
         return stability, margin, lam
 
-    def _track_air_time(self, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _track_air_time(self, contacts: Array) -> tuple[Array, Array]:
         """Touchdowns (N, 4) and each touching-down foot's time in the air [s] (0 elsewhere).
 
         Kept before the rewards so that a zero reward weight changes nothing.
@@ -592,9 +592,7 @@ class AnymalCore:
         self._prev_contacts[...] = contacts
         return touchdown, air_at_touchdown
 
-    def _terminations(
-        self, state: SimulationState, base_height: np.ndarray, diverged: np.ndarray
-    ) -> dict[str, np.ndarray]:
+    def _terminations(self, state: SimulationState, base_height: Array, diverged: Array) -> dict[str, Array]:
         """(N,) flags of each cause of :mod:`margin_rl.envs.terminations` (OR'ed, they are ``terminated``);
         ``base_height`` [m] above the terrain under the base."""
         inputs = {
@@ -606,7 +604,7 @@ class AnymalCore:
         }
         return termination_causes(inputs, self.config.termination)
 
-    def push(self, ids: np.ndarray, force: np.ndarray, duration_s: float, frame: str = "world") -> None:
+    def push(self, ids: Array, force: Array, duration_s: float, frame: str = "world") -> None:
         """Push the base of environments ``ids``, from the next step on: a constant force ``force`` (len(ids), 3)
         [N] at the base origin for ``duration_s`` rounded to whole policy steps (at least one), so the impulse is
         ``force * steps * dt`` [N s]. ``frame``: "world", or "heading" (the base frame turned by its yaw only, as
@@ -644,7 +642,7 @@ class AnymalCore:
         self._push_steps_left[...] = self.xp.clip(self._push_steps_left - 1, min=0)
 
     # ------------------------------------------------------------------ observations
-    def _observe(self, values: dict[str, np.ndarray]) -> np.ndarray:
+    def _observe(self, values: dict[str, Array]) -> Array:
         noise = self.config.randomization.observation_noise
         return assemble({**values, "last_action": self.last_action}, self._policy_terms, noise, self.rng)
 
@@ -662,7 +660,7 @@ class AnymalCore:
             values["height_scan"] = self._ground.height_scan(state, scan_heights)
         return values
 
-    def observe_all(self) -> np.ndarray:
+    def observe_all(self) -> Array:
         """Policy observations of every environment (after :meth:`reset`)."""
         return self.observe(np.arange(self.num_envs))
 
@@ -673,7 +671,7 @@ class AnymalCore:
         check_finite_outputs(self.config, 0.0, observations)
         return observations
 
-    def privileged_observation(self) -> np.ndarray:
+    def privileged_observation(self) -> Array:
         """Critic group: terrain heights around the feet, friction and the current margin."""
         feet = self._float(self.physics.site_xpos[:, self._reader.feet_sites])
         values = {
@@ -684,7 +682,7 @@ class AnymalCore:
         return assemble(values, PRIVILEGED_OBSERVATIONS, 0.0, self.rng)
 
     @property
-    def last_lambda(self) -> np.ndarray:
+    def last_lambda(self) -> Array:
         """lambda (N, 47) of the last step (for analysis and tests)."""
         return self._last_lambda
 

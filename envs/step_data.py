@@ -9,29 +9,29 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from margin_rl.arrays import namespace, to_numpy
+from margin_rl.arrays import Array, namespace, to_numpy
 from margin_rl.envs.config import EnvConfig
 
 
 @dataclass(frozen=True)
 class SimulationState:
     """World-frame state of some environments, read from the batch's arrays (N leading; numpy arrays, or torch
-    tensors on the physics' device: the types below name the host's kind)."""
+    tensors on the physics' device)."""
 
-    base_pos: np.ndarray  # (N, 3) [m]
-    base_rot: np.ndarray  # (N, 3, 3) R_WB
-    lin_vel_world: np.ndarray  # (N, 3) base linear velocity [m/s]
-    ang_vel_body: np.ndarray  # (N, 3) base angular velocity, base frame [rad/s]
-    ang_vel_world: np.ndarray  # (N, 3) [rad/s]
-    joint_pos: np.ndarray  # (N, 12) [rad]
-    joint_vel: np.ndarray  # (N, 12) [rad/s]
-    com: np.ndarray  # (N, 3) whole-body CoM [m]
-    com_vel: np.ndarray  # (N, 3) [m/s]
-    feet: np.ndarray  # (N, 4, 3) foot-sphere centres [m]
-    contacts: np.ndarray  # (N, 4) bool, foot-terrain contact
-    base_contact: np.ndarray  # (N,) bool
-    thigh_contacts: np.ndarray  # (N, 4) bool
-    knees: np.ndarray  # (N, 4, 3) knee (KFE joint) positions [m]
+    base_pos: Array  # (N, 3) [m]
+    base_rot: Array  # (N, 3, 3) R_WB
+    lin_vel_world: Array  # (N, 3) base linear velocity [m/s]
+    ang_vel_body: Array  # (N, 3) base angular velocity, base frame [rad/s]
+    ang_vel_world: Array  # (N, 3) [rad/s]
+    joint_pos: Array  # (N, 12) [rad]
+    joint_vel: Array  # (N, 12) [rad/s]
+    com: Array  # (N, 3) whole-body CoM [m]
+    com_vel: Array  # (N, 3) [m/s]
+    feet: Array  # (N, 4, 3) foot-sphere centres [m]
+    contacts: Array  # (N, 4) bool, foot-terrain contact
+    base_contact: Array  # (N,) bool
+    thigh_contacts: Array  # (N, 4) bool
+    knees: Array  # (N, 4, 3) knee (KFE joint) positions [m]
 
     def finite(self) -> SimulationState:
         """The same state with every non-finite float replaced by 0 (a diverged step's bookkeeping)."""
@@ -53,24 +53,24 @@ class Accelerations:
     acceleration metrics measure, whatever the filter).
     """
 
-    com: np.ndarray  # (N, 3) [m/s^2], EMA-filtered (EnvConfig.acceleration_filter)
-    base_angular: np.ndarray  # (N, 3) [rad/s^2], EMA-filtered
-    joints: np.ndarray  # (N, 12) [rad/s^2], unfiltered
-    com_measured: np.ndarray  # (N, 3) [m/s^2], unfiltered
-    base_angular_measured: np.ndarray  # (N, 3) [rad/s^2], unfiltered
+    com: Array  # (N, 3) [m/s^2], EMA-filtered (EnvConfig.acceleration_filter)
+    base_angular: Array  # (N, 3) [rad/s^2], EMA-filtered
+    joints: Array  # (N, 12) [rad/s^2], unfiltered
+    com_measured: Array  # (N, 3) [m/s^2], unfiltered
+    base_angular_measured: Array  # (N, 3) [rad/s^2], unfiltered
 
 
 @dataclass(frozen=True)
 class StepOutput:
     """Result of :meth:`AnymalCore.step` for all environments."""
 
-    observation: np.ndarray  # (N, obs) float32, after autoreset for finished environments
-    reward: np.ndarray  # (N,) float64
-    terminated: np.ndarray  # (N,) bool
-    truncated: np.ndarray  # (N,) bool
-    info: dict[str, np.ndarray]  # per-environment arrays (reward_<term>, margin, accelerations, ...)
-    final_observation: np.ndarray  # (N, obs): the observation before autoreset (valid where done)
-    privileged: np.ndarray | None  # (N, priv) critic observation, after autoreset
+    observation: Array  # (N, obs) float32, after autoreset for finished environments
+    reward: Array  # (N,) float64
+    terminated: Array  # (N,) bool
+    truncated: Array  # (N,) bool
+    info: dict[str, Array]  # per-environment arrays (reward_<term>, margin, accelerations, ...)
+    final_observation: Array  # (N, obs): the observation before autoreset (valid where done)
+    privileged: Array | None  # (N, priv) critic observation, after autoreset
 
     def to_numpy(self) -> StepOutput:
         """This output with every array on the host as numpy (itself where it is already: the Gymnasium and SB3
@@ -88,7 +88,7 @@ class StepOutput:
         )
 
 
-def check_finite_outputs(config: EnvConfig, reward: np.ndarray | float, *observations: np.ndarray) -> None:
+def check_finite_outputs(config: EnvConfig, reward: Array | float, *observations: Array) -> None:
     """FloatingPointError if a reward or an observation is NaN or inf.
 
     The core keeps diverged simulations finite (and flags them in ``info["diverged"]``); what is left is a

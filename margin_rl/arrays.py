@@ -14,6 +14,10 @@ from typing import Any
 import numpy as np
 from array_api_compat import array_namespace, is_array_api_obj
 
+Array = Any
+"""A numpy array or a torch tensor on any device (what the environments' equations take and answer, in the kind of
+their inputs): an annotation for code that runs on both."""
+
 _HOST_VALUES = (np.ndarray, np.generic, float, int, bool, list, tuple)
 """Values that mean numpy: its arrays and scalars, and Python numbers and sequences (they take numpy's kind)."""
 

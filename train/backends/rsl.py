@@ -295,7 +295,7 @@ class CheckpointingRunner(OnPolicyRunner):
             "num_actions": int(self.adapter.num_actions),
             "action_std": self.exploration.last_mean_std,  # mean over the actions, after the last update
             "torch_rng_state": torch.get_rng_state(),
-            "numpy_rng_state": generator_state(self.adapter.core.rng),
+            "env_rng_state": generator_state(self.adapter.core.rng),  # numpy's or the device generator's state
             "curriculum_levels": self.adapter.curriculum_levels(),  # None without a terrain curriculum
         }
         return saved
@@ -323,7 +323,8 @@ class CheckpointingRunner(OnPolicyRunner):
         self.logger.tot_timesteps = self.env_steps
         self.logger.tot_time = float(infos.get("elapsed_s", 0.0))
         torch.set_rng_state(infos["torch_rng_state"])
-        env_rng, saved = self.adapter.core.rng, infos["numpy_rng_state"]  # the key predates device generators
+        env_rng = self.adapter.core.rng
+        saved = infos["env_rng_state"] if "env_rng_state" in infos else infos["numpy_rng_state"]  # the older name
         if self.writes and isinstance(saved, dict) == isinstance(env_rng, np.random.Generator):
             set_generator_state(env_rng, saved)
         # else the run was trained on the other kind of physics (host <-> device), or this process is not rank 0 of

@@ -46,7 +46,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice
+from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, check_physics_choice
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.margin_kinds import check_margin_runs_on
 from margin_rl.envs.physics import usable_cores
@@ -662,9 +662,11 @@ def main(argv: list[str] | None = None) -> int:
         spec, run_dir, resume = spec_from_args(args)
         check_environment(spec)
         check_margin_runs_on(spec.target.config.margin, args.physics)
+        physics_options = parse_assignments(args.physics_option, "--physics-option")
+        check_physics_choice(args.physics, args.physics_device, physics_options)  # before the run folder is written
         if resume:
             check_same_margin(spec, run_dir)
-    except (ValueError, TypeError, FileNotFoundError) as exc:
+    except (ValueError, TypeError, FileNotFoundError, ImportError) as exc:
         parser.error(str(exc))
     # recorded as a user types it, whatever path or module launched it (the bundle cards quote it)
     command = ["margin-rl-train", *(sys.argv[1:] if argv is None else argv)]
@@ -682,7 +684,7 @@ def main(argv: list[str] | None = None) -> int:
             update_threads=args.update_threads,
             physics=args.physics,
             physics_device=args.physics_device,
-            physics_options=parse_assignments(args.physics_option, "--physics-option"),
+            physics_options=physics_options,
         )
     except FileExistsError as exc:
         parser.error(str(exc))

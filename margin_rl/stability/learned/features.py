@@ -542,10 +542,10 @@ def physics_features_torch(lam: Any, constants: PhysicsConstants) -> Any:
     ops = _TorchOps()
     terms = _smooth_terms(col, constants, ops)
     contacts = torch.stack(terms.contacts, 1).detach()  # a mask in the support distance (as in numpy)
-    table = (
-        torch.as_tensor(_FIRST),
-        torch.as_tensor(_SECOND),
-        *(torch.as_tensor(a, dtype=x.dtype) for a in (_ALPHA, _BETA, _KX, _KY)),
+    table = (  # on lambda's device: a tensor elsewhere (the CPU's beside a GPU's) could not be combined with it
+        torch.as_tensor(_FIRST, device=x.device),
+        torch.as_tensor(_SECOND, device=x.device),
+        *(torch.as_tensor(a, dtype=x.dtype, device=x.device) for a in (_ALPHA, _BETA, _KX, _KY)),
     )
 
     def distance(point: tuple[Any, Any]) -> Any:

@@ -188,6 +188,14 @@ def test_numpy_and_torch_agree_in_values_and_jacobians() -> None:
     assert physics_features_torch(x[0], CONSTANTS).shape == (N_FEATURES,)
 
 
+def test_the_torch_features_stay_on_lambdas_device() -> None:
+    """Every tensor the features combine is made on lambda's device: on torch's "meta" device (shapes only, no data:
+    any tensor left on the CPU would refuse to combine with it, as it would beside a GPU)."""
+    lam = torch.as_tensor(random_states(4, seed=5)).to("meta")
+    out = physics_features_torch(lam, CONSTANTS)
+    assert out.device.type == "meta" and tuple(out.shape) == (4, N_FEATURES)
+
+
 def test_features_are_mirror_equivariant_to_the_last_bit() -> None:
     lam = random_states(500, seed=3)
     f = physics_features(lam, CONSTANTS)

@@ -308,3 +308,38 @@ def _started_levels(run_dir: Path) -> list[int]:
 
     spec = train_module.TrainSpec.from_json(read_json(run_dir / "config.json"))
     return make_core(spec.env_config, spec.num_envs, spec.seed).terrain_level.tolist()
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--physics", "warp", "--physics-device", "cuda:7"], "physics_device must be one of Warp's devices"),
+        (["--physics", "warp", "--physics-device", "cpu", "--physics-option", "foo=1"], "not settings of"),
+        (["--physics-device", "cuda:0"], "physics='mujoco' runs on the CPU"),
+    ],
+)
+def test_a_bad_physics_choice_is_one_line_before_the_run_folder_is_written(
+    options: list[str], message: str, tmp_path: Path, toy_weights: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    if "warp" in options:
+        require_mujoco_warp()
+    run_dir = tmp_path / "run"
+    with pytest.raises(SystemExit):
+        train_module.main([*tiny_args("rsl", run_dir, toy_weights, total=192, every=192), *options])
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not run_dir.exists()
+
+
+def test_the_environments_generator_state_is_saved_by_its_name_and_the_older_name_still_resumes(
+    tmp_path: Path, toy_weights: str
+) -> None:
+    run_dir = tmp_path / "run"
+    assert train_module.main(tiny_args("rsl", run_dir, toy_weights, total=192, every=192)) == 0
+    checkpoint = latest_checkpoint(run_dir)
+    saved = torch.load(checkpoint, weights_only=True)
+    assert "env_rng_state" in saved["infos"] and "numpy_rng_state" not in saved["infos"]
+    saved["infos"]["numpy_rng_state"] = saved["infos"].pop("env_rng_state")  # as written before the rename
+    torch.save(saved, checkpoint)
+    assert train_module.main(["--resume", str(run_dir), "--total-steps", "384", "--no-progress"]) == 0
+    assert json.loads((run_dir / "progress.json").read_text())["env_steps"] == 384

@@ -221,9 +221,6 @@ class AnymalCore:
         self.observation_size = sum(t.size for t in self._policy_terms)
         scan = np.array(HEIGHT_SCAN_POINTS)
         self._scan_offsets = self._array(np.column_stack([scan, np.zeros(len(scan))]))  # (P, 3) in the heading frame
-        self._ground = GroundQueries(
-            self.terrain, self.robot.foot_radius, self.robot.standing_height, self._scan_offsets
-        )
         self._foot_offsets = self._array(np.array(FOOT_HEIGHT_OFFSETS))  # (9, 2): made once, not a copy per step
         self.privileged_size = sum(t.size for t in PRIVILEGED_OBSERVATIONS)
 
@@ -239,6 +236,11 @@ class AnymalCore:
         self._prev_contacts = xp.ones((n, 4), dtype=xp.bool, device=self.device)
         self._last_margin = xp.zeros(n, dtype=xp.float64, device=self.device)
         self._last_lambda = xp.zeros((n, LAMBDA_DIM), dtype=xp.float64, device=self.device)
+
+    @property
+    def _ground(self) -> GroundQueries:
+        """The step's terrain lookups (:mod:`.ground`) on the core's terrain as it is now."""
+        return GroundQueries(self.terrain, self.robot.foot_radius, self.robot.standing_height, self._scan_offsets)
 
     # ------------------------------------------------------------------ arrays
     def _array(self, value: Any, dtype: Any = None) -> Any:

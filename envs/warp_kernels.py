@@ -132,6 +132,29 @@ def record_launches(run: Callable[[], None]) -> list[ModuleVariant]:
     return variants
 
 
+@contextmanager
+def counting_compiles() -> Iterator[list[tuple[str, float]]]:
+    """Within the block, every Warp module compiled (not loaded from the kernel cache) adds (its name, the seconds
+    its compile took) to the list this yields: how many modules a cache compiled ahead left to compile."""
+    import warp._src.context as context
+
+    compile_module = context.Module._compile
+    compiled: list[tuple[str, float]] = []
+
+    def counted(module: Any, *args: Any, **kwargs: Any) -> bool:
+        began = time.perf_counter()
+        done = compile_module(module, *args, **kwargs)
+        if done:
+            compiled.append((module.name, time.perf_counter() - began))
+        return done
+
+    context.Module._compile = counted
+    try:
+        yield compiled
+    finally:
+        context.Module._compile = compile_module
+
+
 def compile_ahead(
     variants: list[ModuleVariant],
     cache_dir: str | os.PathLike[str],

@@ -28,7 +28,9 @@ what it measured):
    and to the end.
 
 Medians over ``--rounds`` interleaved rounds for stages 1 and 2 (round r measures every configuration once). On a
-GPU every timing waits for the device (``torch.cuda.synchronize``) before the clock is read.
+GPU every timing waits for the device (``torch.cuda.synchronize``) before the clock is read. The JSON also lists
+the Warp modules compiled during the run (``warp_modules_compiled``: name and seconds) and the kernel cache used
+(``WARP_CACHE_PATH``, e.g. one compiled ahead by ``python -m margin_rl.train kernels``).
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ import torch
 
 from benchmarks.harness import machine, machine_line
 from margin_rl.atomic import atomic_write_text
+from margin_rl.envs.warp_kernels import counting_compiles
 
 ROBOT_ID = "margin_rl/AnymalC-v1"
 RECIPE = "robust"
@@ -355,7 +358,11 @@ def main(argv: list[str] | None = None) -> int:
         ),
         "training": lambda partial: training(args, settings, partial),
     }
-    failed = [name for name in stages if name in args.stages and not run_stage(record, name, stages[name])]
+    record.data["warp_cache_path"] = os.environ.get("WARP_CACHE_PATH")  # a kernel cache compiled ahead, if any
+    with counting_compiles() as compiled:  # the modules Warp compiled here rather than loaded from its cache
+        record.data["warp_modules_compiled"] = compiled  # the same list, filled as modules compile
+        failed = [name for name in stages if name in args.stages and not run_stage(record, name, stages[name])]
+    record.data["warp_compile_seconds"] = sum(seconds for _, seconds in compiled)
     record.data["wall_seconds"] = time.perf_counter() - started
     record.write()
     print(f"wrote {record.path} ({record.data['wall_seconds']:.0f} s)" + (f"; failed: {failed}" if failed else ""))

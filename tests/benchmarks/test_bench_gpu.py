@@ -33,6 +33,9 @@ def test_every_stage_runs_small_on_warps_cpu_device_and_writes_its_record(tmp_pa
         assert steps == sorted(set(steps)) and steps[-1] == run["env_steps"]  # each checkpoint once, the last too
         assert all(0 <= row["falls"] <= 1 and row["velocity_error"] >= 0 for row in run["checkpoints"])
     assert all(stages[name]["complete"] for name in stages)
+    # the modules Warp compiled in the run (none where its cache already held them) and their seconds
+    assert all(isinstance(name, str) and seconds >= 0 for name, seconds in record["warp_modules_compiled"])
+    assert record["warp_compile_seconds"] >= 0 and "warp_cache_path" in record
 
 
 def test_a_stage_that_raises_is_recorded_with_its_traceback_and_the_next_stage_still_runs(

@@ -64,22 +64,23 @@ def test_a_cache_compiled_ahead_for_the_cpu_loads_in_a_fresh_process_without_com
     path = write_report(report, "tiny")
     assert json.loads(path.read_text())["failed"] == 0
     script = (
-        "import warp._src.context as c\n"
-        "compiled = []\n"
-        "original = c.Module._compile\n"
-        "def counting(self, *a, **k):\n"
-        "    result = original(self, *a, **k)\n"
-        "    compiled.append(self.name) if result else None\n"
-        "    return result\n"
-        "c.Module._compile = counting\n"
+        "from margin_rl.envs.warp_kernels import counting_compiles\n"
         "from tests.envs.test_warp_kernels import launch_both\n"
-        "launch_both()\n"
+        "with counting_compiles() as compiled:\n"
+        "    launch_both()\n"
         "print('compiled', len(compiled))\n"
     )
-    env = {**os.environ, "WARP_CACHE_PATH": str(tmp_path), "CUDA_VISIBLE_DEVICES": ""}
-    run = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
-    assert run.returncode == 0, run.stderr[-2000:]
-    assert run.stdout.strip().splitlines()[-1] == "compiled 0"
+
+    def compiled_in_a_fresh_process(cache: Path) -> str:
+        env = {**os.environ, "WARP_CACHE_PATH": str(cache), "CUDA_VISIBLE_DEVICES": ""}
+        run = subprocess.run(
+            [sys.executable, "-c", script], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
+        )
+        assert run.returncode == 0, run.stderr[-2000:]
+        return run.stdout.strip().splitlines()[-1]
+
+    assert compiled_in_a_fresh_process(tmp_path) == "compiled 0"
+    assert compiled_in_a_fresh_process(tmp_path / "empty") == "compiled 1"  # the same module, no cache: compiled
 
 
 def test_an_sm90_cache_holds_cubin_and_ptx_compiled_without_a_gpu(tmp_path: Path) -> None:

@@ -161,9 +161,8 @@ class AnymalCore:
             self._added_mass = self.rng.uniform(*config.randomization.added_base_mass, size=num_envs)
             masses[:, self._base] = self._cast(self.physics.body_mass(self._base) + self._added_mass, masses)
             self.physics.set_const()
-        self.terrain_level = xp.zeros(
-            n, dtype=xp.int64, device=self.device
-        )  # the curriculum row each environment spawns on (0 without)
+        # the curriculum row each environment spawns on (0 without)
+        self.terrain_level = xp.zeros(n, dtype=xp.int64, device=self.device)
         if self.terrain.levels:
             first = self.rng.integers(0, config.terrain_config.initial_max_level + 1, size=n)
             self.terrain_level = self._index(first)

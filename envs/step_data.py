@@ -4,7 +4,6 @@ that no non-finite output leaves a step."""
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,16 +31,6 @@ class SimulationState:
     base_contact: Array  # (N,) bool
     thigh_contacts: Array  # (N, 4) bool
     knees: Array  # (N, 4, 3) knee (KFE joint) positions [m]
-
-    def finite(self) -> SimulationState:
-        """The same state with every non-finite float replaced by 0 (a diverged step's bookkeeping)."""
-        xp = namespace(self.base_pos)
-        changes = {}
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if xp.isdtype(value.dtype, "real floating"):
-                changes[f.name] = xp.where(xp.isfinite(value), value, 0.0)
-        return dataclasses.replace(self, **changes)
 
 
 @dataclass(frozen=True)

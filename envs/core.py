@@ -208,6 +208,7 @@ class AnymalCore:
         self._reader = StateReader(physics, self.robot)
         self._key, key_qpos, key_ctrl = physics.keyframe(names.STANDING_KEYFRAME)
         self._key_qpos, self._key_ctrl = self._array(key_qpos), self._array(key_ctrl)
+        self._key_ctrl_physics = self._cast(self._key_ctrl, physics.ctrl)  # in the physics' own dtype, once
         self._standing_joint_pos = self._array(self.robot.standing_joint_pos)
         # |tau| within this share of the MJCF forcerange counts as at the limit (MuJoCo clips to it exactly; Warp's
         # float32 rounds within ~1e-7 of it)
@@ -346,7 +347,7 @@ class AnymalCore:
         qvel[:, names.BASE_QVEL] = rng.uniform(-1, 1, size=(n, 6)) * rnd.reset_velocity_noise
         rows.write(physics.qpos, self._cast(qpos, physics.qpos))
         rows.write(physics.qvel, self._cast(qvel, physics.qvel))
-        rows.write(physics.ctrl, self._cast(self._key_ctrl, physics.ctrl))
+        rows.write(physics.ctrl, self._key_ctrl_physics)
         rows.write(physics.xfrc_applied, 0.0)
         mu = self.mu[rows.select]
         if rnd.friction is not None:

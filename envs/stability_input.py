@@ -63,7 +63,7 @@ def stability_state_from_simulation(
         ext_force=in_h[:, 3],
         ext_torque=in_h[:, 4],
         feet=in_h[:, 5:9],
-        mu=xp.astype(xp.asarray(mu), xp.float64),
+        mu=xp.astype(xp.asarray(mu), xp.float64, copy=False),
         contacts=xp.astype(xp.asarray(contacts), xp.float64),
         normals=in_h[:, 9:13],
     )

@@ -73,10 +73,10 @@ INFO_KEYS: tuple[str, ...] = tuple(c.info_key for c in TERMINATION_CAUSES)
 def termination_causes(inputs: Arrays, bounds: TerminationConfig) -> dict[str, Any]:
     """Each cause's (N,) bool flags; a diverged environment has only ``diverged`` set (module docstring)."""
     xp = namespace(inputs["diverged"])
-    finite_state = ~xp.astype(inputs["diverged"], xp.bool)
+    finite_state = ~xp.astype(inputs["diverged"], xp.bool, copy=False)
     causes = {}
     for cause in TERMINATION_CAUSES:
-        holds = xp.astype(cause.condition(inputs, bounds), xp.bool)
+        holds = xp.astype(cause.condition(inputs, bounds), xp.bool, copy=False)
         causes[cause.name] = holds if cause.name == "diverged" else holds & finite_state
     return causes
 

@@ -9,12 +9,15 @@
 #   run carry=[".gpu/p3"] command: bash benchmarks/speed/bench_gpu_device.sh 520     (timeout_s ~590)
 # with array-api-compat's wheel (not in the machine's image) put in .gpu/p3 beforehand:
 #   pip download --no-deps --only-binary=:all: -d .gpu/p3 array-api-compat==1.16.0
-# Kernels compiled ahead (no GPU needed; cubin is what Warp loads where the driver is older than its CUDA 13.4):
-#   python -m margin_rl.train kernels --env margin_rl/AnymalC-v1 --recipe robust --cache .gpu/kernels --format cubin
-#   run carry=[".gpu/kernels"] command: cp -r .gpu/kernels /tmp/kernels          (before the last call)
+# Kernels compiled ahead (no GPU needed), packed into the last part (C flat and rough: ~2.5 MiB with xz):
+#   python -m margin_rl.train kernels --env margin_rl/AnymalC-v1 --recipe robust --cache build/warp-kernels
+#   python -m margin_rl.train kernels --env margin_rl/AnymalC-Rough-v1 --recipe rough --cache build/warp-kernels
+#   tar cJf .gpu/p3/kernels.tar.xz -C build warp-kernels
 # Arguments: the benchmark's time limit in seconds (default 520), then any further arguments of bench_gpu.py.
 set -e
-if [ -d /tmp/kernels ]; then export WARP_CACHE_PATH=/tmp/kernels; fi
+if [ -f .gpu/p3/kernels.tar.xz ]; then
+  tar xJf .gpu/p3/kernels.tar.xz -C /tmp && export WARP_CACHE_PATH=/tmp/warp-kernels
+fi
 cat /tmp/c1 /tmp/c2 .gpu/p3/chunk | xz -d | tar xf - -C /tmp
 export PYTHONPATH=/tmp/site GIT_PYTHON_REFRESH=quiet PYTHONUNBUFFERED=1
 python3 -m pip install -q --no-index --no-deps --no-build-isolation --no-compile --target /tmp/site \

@@ -13,7 +13,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from margin_rl.arrays import namespace, rotate
+import numpy as np
+
+from margin_rl.arrays import constant, namespace, rotate
 
 if TYPE_CHECKING:
     from margin_rl.envs.step_data import SimulationState
@@ -103,8 +105,10 @@ def assemble(values: dict[str, Any], terms: tuple[ObservationTerm, ...], noise_l
         v = xp.reshape(xp.astype(xp.asarray(values[t.name]), xp.float64, copy=False), (-1, t.size))
         if noise_level > 0 and t.noise > 0:
             v = v + rng.uniform(-1.0, 1.0, size=v.shape) * t.noise * noise_level
-        parts.append(v * t.scale)
-    return xp.astype(xp.concat(parts, axis=1), xp.float32)
+        parts.append(v)
+    # every term scaled in one product (on a device one operation, not one per term)
+    scales = constant(np.repeat([t.scale for t in terms], [t.size for t in terms]), parts[0])
+    return xp.astype(xp.concat(parts, axis=1) * scales, xp.float32)
 
 
 def robot_state_terms(state: SimulationState, command: Any, standing_joint_pos: Any) -> dict[str, Any]:

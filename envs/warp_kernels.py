@@ -88,8 +88,9 @@ def _launch_block_dim(requested: Any) -> int:
 
 @contextmanager
 def recording_launches() -> Iterator[list[ModuleVariant]]:
-    """Within the block, every Warp launch (eager, or recorded into a graph) adds its kernel's module and the block
-    size a GPU would launch it with to the list this yields (each variant once, in launch order)."""
+    """Record every Warp launch made within the block (eager, or recorded into a graph): its kernel's module and the
+    block size a GPU would launch it with, each variant once, in launch order, in the list this yields, which is
+    filled when the block ends."""
     import warp as wp
     import warp._src.context as context
 

@@ -100,7 +100,7 @@ class Terrain:
     resolution: float
     spawn_points: np.ndarray  # (k, 3) flat places to put a robot: x, y, ground height
     levels: int = 0  # curriculum: the spawn points are levels rows of k / levels, row-major; 0: no curriculum
-    _on_device: dict[Any, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+    _on_device: dict[Any, tuple[Any, Any]] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)

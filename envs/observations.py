@@ -10,6 +10,7 @@ gravity projected into the base frame, joint positions relative to the standing 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -107,8 +108,13 @@ def assemble(values: dict[str, Any], terms: tuple[ObservationTerm, ...], noise_l
             v = v + rng.uniform(-1.0, 1.0, size=v.shape) * t.noise * noise_level
         parts.append(v)
     # every term scaled in one product (on a device one operation, not one per term)
-    scales = constant(np.repeat([t.scale for t in terms], [t.size for t in terms]), parts[0])
-    return xp.astype(xp.concat(parts, axis=1) * scales, xp.float32)
+    return xp.astype(xp.concat(parts, axis=1) * constant(_scales(terms), parts[0]), xp.float32)
+
+
+@functools.cache
+def _scales(terms: tuple[ObservationTerm, ...]) -> np.ndarray:
+    """Each observation entry's scale, in the order of ``terms``."""
+    return np.repeat([t.scale for t in terms], [t.size for t in terms])
 
 
 def robot_state_terms(state: SimulationState, command: Any, standing_joint_pos: Any) -> dict[str, Any]:

@@ -17,7 +17,8 @@ printed in bold.
 
 ``--per-robot lateral:45 longitudinal:75`` prints instead one table per robot, the README's: a column per command, a
 row per measure (falls, velocity error, accelerations, stance width, push survival at the pushes named, the model
-mismatch conditions summarised), each with its p.
+mismatch conditions summarised), each with its p; ``--cost-rows`` adds joint-torque RMS, the share of steps with a
+joint at its torque limit and the margin term's share of the reward (the field-reward study's tables).
 
 ``--rough D REPORT`` (repeatable; no ``--robot`` needed) prints the README's **rough-ground** table instead: one row
 per evaluation terrain difficulty ``D`` and command of a ``compare`` report or bundle card evaluated on that terrain
@@ -162,6 +163,14 @@ ROBOT_TABLE_METRICS = (
     ("stance width [m]", "stance_width_mean", ".3f", True),
 )
 """(row label, metric, format, show the relative change) of :func:`robot_table`'s flat-ground rows."""
+COST_ROWS = (
+    ("joint torque RMS [N m]", "torque_rms", ".1f", True),
+    ("steps with a joint at its torque limit", "torque_limit_fraction", ".4f", False),
+    ("margin term's share of the reward", "margin_reward_share", ".3f", False),
+)
+"""(row label, episode metric, format, show the relative change) of ``--cost-rows``: what the gait costs and how large
+the margin term is in the reward, read from each run's episode metrics (the report's statistics hold only the table's
+columns) and tested over seeds here."""
 FALLS_TOLERANCE = 0.01
 """The comparison's falls tolerance: the margin variant falls in no more than the baseline's share + 1 point."""
 
@@ -208,11 +217,22 @@ def _mismatch_text(report: dict[str, Any], command: float) -> str:
     return f"falls within +1 pt in {kept} / {len(cells)}; lin. acc. {span} (p < 0.05 in {significant} / {len(cells)})"
 
 
-def robot_table(report: dict[str, Any], push: dict[str, Any], pushes: list[tuple[str, float]]) -> list[str]:
+def _run_metric_text(cell: dict[str, Any], metric: str, fmt: str, relative: bool) -> str:
+    """ "without → with" of episode metric ``metric`` in one evaluation cell, from each run's metrics: the means over
+    seeds, the relative change where asked, Welch's p over seeds (:func:`compare_seeds`)."""
+    per_seed = [[run["metrics"][metric] for run in cell["variants"][name]["runs"]] for name in VARIANTS]
+    test = compare_seeds(metric, per_seed[0], per_seed[1], names=VARIANTS)
+    stats = {"relative": test.relative, "p_value": test.p_value}
+    return _change_text(test.mean_a, test.mean_b, fmt, stats, relative)
+
+
+def robot_table(
+    report: dict[str, Any], push: dict[str, Any], pushes: list[tuple[str, float]], cost_rows: bool = False
+) -> list[str]:
     """One robot's table for the README: a column per evaluated command, a row per measure ("without → with",
     mean over seeds, the relative change where it reads as one, Welch's p over seeds): falls (counts over all
-    episodes), the flat-ground metrics, push survival at each (direction, impulse) of ``pushes``, and the model
-    mismatch conditions summarised (:func:`_mismatch_text`)."""
+    episodes), the flat-ground metrics, with ``cost_rows`` those of :data:`COST_ROWS`, push survival at each
+    (direction, impulse) of ``pushes``, and the model mismatch conditions summarised (:func:`_mismatch_text`)."""
     cells = nominal_cells(report)
     commands = [c["forward_velocity"] for c in cells]
     episodes = int(report["settings"]["eval_episodes"])
@@ -227,6 +247,9 @@ def robot_table(report: dict[str, Any], push: dict[str, Any], pushes: list[tuple
         for cell in cells:
             a, b = (cell["variants"][name]["mean"][metric] for name in VARIANTS)
             values.append(_change_text(a, b, fmt, cell["statistics"][metric], relative))
+        lines.append(f"| {label} | " + " | ".join(values) + " |")
+    for label, metric, fmt, relative in COST_ROWS if cost_rows else ():
+        values = [_run_metric_text(cell, metric, fmt, relative) for cell in cells]
         lines.append(f"| {label} | " + " | ".join(values) + " |")
     for direction, impulse in pushes:
         values = [
@@ -260,6 +283,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--push-command", type=float, default=0.75, help="command of the push table [m/s]")
     parser.add_argument("--impulses", type=float, nargs="+", default=[30.0, 45.0, 60.0, 75.0])
     parser.add_argument(
+        "--cost-rows", action="store_true", help="with --per-robot: rows of joint torques and the margin term's share"
+    )
+    parser.add_argument(
         "--per-robot",
         nargs="+",
         metavar="DIRECTION:IMPULSE",
@@ -283,7 +309,7 @@ def main(argv: list[str] | None = None) -> int:
         pushes = [(d, float(i)) for d, i in (item.split(":") for item in args.per_robot)]
         for label, compare, push in loaded:
             print(f"{label}:\n")
-            print("\n".join(robot_table(compare, push, pushes)) + "\n")
+            print("\n".join(robot_table(compare, push, pushes, args.cost_rows)) + "\n")
         return 0
     for _, _, push in loaded:
         missing = [i for i in args.impulses if i not in push["protocol"]["impulses"]]

@@ -493,3 +493,22 @@ def test_headline_rough_rows_count_falls_and_their_causes_over_every_seeds_episo
             variant["mean"] = {k: v for k, v in variant["mean"].items() if k in SUMMARY_METRICS}
     with pytest.raises(ValueError, match="not evaluated on rough ground"):
         module.rough_rows("0.75", module.as_report(report))
+
+
+def test_headline_cost_rows_are_the_runs_episode_metrics_tested_over_seeds() -> None:
+    """--cost-rows: joint-torque RMS, the share of steps at a torque limit and the margin term's share of the reward,
+    "without → with" means over the runs' own episode metrics with Welch's p over seeds (the field study's pilot)."""
+    module = _study("headline_table")
+    pilot = ROOT / "docs" / "comparison" / "field" / "pilot_c" / "compare.json"
+    report = module.as_report(json.loads(pilot.read_text()))
+    lines = module.robot_table(report, {}, [], cost_rows=True)
+    rows = {row.split("|")[1].strip(): [c.strip() for c in row.strip().strip("|").split("|")[1:]] for row in lines[3:]}
+    at_075 = module.nominal_cells(report)[1]
+    assert at_075["forward_velocity"] == 0.75
+    for label, metric, fmt, _ in module.COST_ROWS:
+        a, b = ([run["metrics"][metric] for run in at_075["variants"][name]["runs"]] for name in module.VARIANTS)
+        text = rows[label][1]
+        assert text.startswith(f"{np.mean(a):{fmt}} → {np.mean(b):{fmt}} (")
+        if np.std(a) + np.std(b) > 0:
+            assert f"{stats.ttest_ind(b, a, equal_var=False).pvalue:.2g}" in text
+    assert rows["margin term's share of the reward"][1].startswith("0.000 → ")  # the baseline has no margin term

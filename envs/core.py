@@ -45,7 +45,7 @@ import mujoco
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import Array, like, namespace, random_generator, rotate
+from margin_rl.arrays import Array, finite_mask, like, namespace, random_generator, rotate
 from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, make_physics
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.episode_state import EPISODE_COUNTERS, EPISODE_STATE, episode_views
@@ -492,11 +492,11 @@ class AnymalCore:
         a = self._array(actions, xp.float64)
         if tuple(a.shape) != (self.num_envs, 12):
             raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {tuple(a.shape)}")
-        finite = xp.isfinite(a)
+        usable = finite_mask(a)
         if self.sync_free:  # raised at the next read; 0 in its place keeps the physics finite until then
-            self._nonfinite_action = ~xp.all(finite, axis=1)  # recorded with the outputs' checks
-            a = xp.where(finite, a, 0.0)
-        elif not bool(xp.all(finite)):
+            self._nonfinite_action = ~xp.all(usable, axis=1)  # recorded with the outputs' checks
+            a = xp.where(usable, a, 0.0)
+        elif not bool(xp.all(usable)):
             raise ValueError("actions contain NaN or inf")
         a = xp.clip(a, -ACTION_BOUND, ACTION_BOUND)
         self.physics.ctrl[:] = self._cast(self._key_ctrl + self.config.action_scale * a, self.physics.ctrl)
@@ -506,10 +506,8 @@ class AnymalCore:
     def _invalid_state(self) -> Any:
         """(N,) True where qpos or qvel is non-finite or a velocity exceeds :data:`DIVERGED_SPEED`."""
         xp, qpos, qvel = self.xp, self.physics.qpos, self.physics.qvel
-        # |x| <= a bound is false for NaN and inf alike: two comparisons cover the three conditions
-        return ~(
-            xp.all(xp.abs(qvel) <= DIVERGED_SPEED, axis=1) & xp.all(xp.abs(qpos) <= xp.finfo(qpos.dtype).max, axis=1)
-        )
+        # |qvel| <= a bound is false for NaN and inf as well: one comparison covers two conditions
+        return ~(xp.all(xp.abs(qvel) <= DIVERGED_SPEED, axis=1) & xp.all(finite_mask(qpos), axis=1))
 
     def _simulate(self) -> Array:
         """Step the physics ``decimation`` times; returns the (N,) divergence flags.

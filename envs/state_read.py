@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from margin_rl.arrays import like, namespace, rotate
+from margin_rl.arrays import finite_mask, like, namespace, rotate
 from margin_rl.envs.physics import PhysicsBackend
 from margin_rl.envs.step_data import SimulationState
 from margin_rl.robot import Robot, quat_wxyz_to_matrix
@@ -83,9 +83,7 @@ class StateReader:
         ang_vel_body = block[:, self._ang_vel]
         ang_vel_world = rotate(R, ang_vel_body)
         if finite:
-            # |x| <= the largest float: false for NaN and inf alike (isfinite dispatches four operations in torch)
-            largest = xp.finfo(block.dtype).max
-            block, R, ang_vel_world = (xp.where(xp.abs(a) <= largest, a, 0.0) for a in (block, R, ang_vel_world))
+            block, R, ang_vel_world = (xp.where(finite_mask(a), a, 0.0) for a in (block, R, ang_vel_world))
             ang_vel_body = block[:, self._ang_vel]
         touching = block[:, self._contact_columns] > 0
         return SimulationState(

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from margin_rl.arrays import namespace, to_numpy
+from margin_rl.arrays import finite_mask, namespace, to_numpy
 
 CHECKS: dict[str, type[Exception]] = {
     "action": ValueError,
@@ -63,11 +63,10 @@ class StepChecks:
         any of ``observations`` (each (N, k)) is not finite."""
         xp = self._xp
         outputs = xp.concat(list(observations), axis=1)
-        # |x| <= the largest finite float: false for NaN and inf alike (isfinite dispatches four operations in torch)
         failed = {
             "action": action_failed,
-            "observation": ~xp.all(xp.abs(outputs) <= xp.finfo(outputs.dtype).max, axis=1),
-            "reward": ~(xp.abs(reward) <= xp.finfo(reward.dtype).max),
+            "observation": ~xp.all(finite_mask(outputs), axis=1),
+            "reward": ~finite_mask(reward),
         }
         self.record(failed, step)
 

@@ -52,6 +52,14 @@ def like(value: Any, reference: Any, dtype: Any = None) -> Any:
     return torch.as_tensor(value, dtype=dtype, device=reference.device)
 
 
+def finite_mask(values: Any) -> Any:
+    """Where ``values`` is finite (bool, same shape), as ``|x| <= the largest float of its dtype``: false for NaN
+    and inf alike, the same answer as ``isfinite`` in two operations (torch's ``isfinite`` dispatches four, each a
+    kernel launch on a device)."""
+    xp = namespace(values)
+    return xp.abs(values) <= xp.finfo(values.dtype).max
+
+
 def rotate(rotations: Any, vectors: Any, inverse: bool = False) -> Any:
     """Vectors turned by a batch of rotation matrices: R_n v (``inverse``: R_n^T v), for ``rotations`` (N, 3, 3) and
     ``vectors`` (N, 3), or (N, k, 3) for k vectors per matrix; the result has ``vectors``' shape.

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from margin_rl.arrays import (
     TorchRandom,
     constant,
+    finite_mask,
     generator_state,
     like,
     namespace,
@@ -112,3 +113,13 @@ def test_a_constant_is_made_once_per_device_and_is_numpy_itself_on_the_host() ->
     assert constant(np.array([1.0, 2.0, 3.0]), reference) is not first  # another dtype, another constant
     host = constant([0.5, 1.5], np.zeros(2))
     assert isinstance(host, np.ndarray) and host.tolist() == [0.5, 1.5]
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=32), min_size=1, max_size=8))
+def test_finite_mask_is_isfinite_on_numpy_and_torch(values: list[float]) -> None:
+    for dtype in (np.float32, np.float64):
+        host = np.array(values, dtype=dtype)
+        np.testing.assert_array_equal(finite_mask(host), np.isfinite(host))
+        device = torch.as_tensor(host)
+        assert torch.equal(finite_mask(device), torch.isfinite(device))

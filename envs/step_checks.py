@@ -31,7 +31,7 @@ CHECKS: dict[str, type[Exception]] = {
     "observation": FloatingPointError,
     "reward": FloatingPointError,
 }
-"""The flags, in bit order, and the exception each raises."""
+"""The checks, in the order of the flags' columns and of the errors raised, and the exception each raises."""
 
 NO_STEP = np.iinfo(np.int64).max
 """The first-step record of an environment whose flag never held."""

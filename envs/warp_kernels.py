@@ -68,7 +68,7 @@ class KernelCacheReport:
     formats: tuple[str, ...]
     modules: tuple[CompiledModule, ...]
     seconds: float
-    kernels: int  # kernels in the modules compiled
+    kernels: int  # kernels in the modules compiled (a module compiled at two block sizes counted once)
     size_mib: float = field(default=0.0)  # the whole cache folder, this and earlier compiles
 
     @property
@@ -181,7 +181,7 @@ def compile_ahead(
     cpu = wp.get_device("cpu") if arch is None else None
     targets = [(None, "o")] if arch is None else [(f == "ptx", f) for f in formats]
     unique = {(id(v.module), 1 if arch is None else v.block_dim): v.module for v in variants}
-    compiled, kernels, start = [], 0, time.perf_counter()
+    compiled, start = [], time.perf_counter()
     for (_, block_dim), module in unique.items():
         began = time.perf_counter()
         module.get_module_hash(block_dim)  # resolves the options of this block size
@@ -194,9 +194,9 @@ def compile_ahead(
                 error = f"{type(failure).__name__}: {str(failure).splitlines()[0][:300]}"
                 break
             files += [str(p.relative_to(cache)) for p in (cache / identifier).glob(f"*.{suffix}")]
-        kernels += len(module.kernels)
         seconds = time.perf_counter() - began
         compiled.append(CompiledModule(module.name, block_dim, identifier, tuple(sorted(files)), seconds, error))
+    kernels = sum(len(module.kernels) for module in {id(m): m for m in unique.values()}.values())  # each module once
     size = sum(p.stat().st_size for p in cache.rglob("*") if p.is_file()) / 2**20
     return KernelCacheReport(
         str(cache_dir),

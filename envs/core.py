@@ -28,13 +28,12 @@ observation is returned separately). Robot names (bodies, sensors, keyframe, the
 ``mujoco.batch``, torch tensors on the physics' device beside Warp, float64 either way; its random draws come from a
 generator of the same kind (numpy's, or :class:`~margin_rl.arrays.TorchRandom` on the device), so the two backends
 draw different numbers from one seed. Every method takes numpy or the core's kind and answers in the core's kind.
-On a device the step reads nothing from the host: resets by mask, random draws of a fixed count, state at fixed
-addresses (:mod:`.episode_state`), checks kept as flags and read every :attr:`AnymalCore.check_every` steps
-(:mod:`.step_checks`).
+On a device the step reads nothing from the host (resets by mask, draws of a fixed count, state at fixed addresses:
+:mod:`.episode_state`; checks as flags read every :attr:`AnymalCore.check_every` steps: :mod:`.step_checks`), and
+on a CUDA device it is replayed as one graph (:mod:`.step_graph`).
 
-A core pickles (and deep-copies): it is rebuilt from its config and terrain, and given back its state (the
-physics' integration state and per-environment model fields, the random generator, commands, filters, pushes,
-episode counters), so that the copy steps to the same numbers as the original.
+A core pickles (and deep-copies): rebuilt from its config and terrain, given back its state (the physics' state and
+per-environment model fields, the generator, commands, filters, pushes, episode counters), it steps as the original.
 """
 
 from __future__ import annotations
@@ -78,6 +77,7 @@ from margin_rl.envs.step_data import (
     check_finite_outputs,
     finite_output_hint,
 )
+from margin_rl.envs.step_graph import step_graph_for
 from margin_rl.envs.step_info import step_info
 from margin_rl.envs.terminations import any_cause, termination_causes
 from margin_rl.envs.terrain import (
@@ -199,8 +199,8 @@ class AnymalCore:
         self.check_every = 1
         """Steps between two reads of a device step's checks (:meth:`raise_pending_errors`): 1 (at once) unless a
         learner sets its rollout length; ignored on the host, where every check raises at once."""
-        self._steps_since_check = 0
-        self.steps_taken = 0  # steps since the core was built, named by the checks' errors
+        self.steps_taken = self._steps_since_check = 0  # steps since the core was built, since the checks' last read
+        self._step_graph = step_graph_for(physics)  # the step recorded and replayed: CUDA only
         self._checks = StepChecks(self.xp.zeros(num_envs, device=self.device))
         self.dt = float(physics.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
@@ -414,10 +414,28 @@ class AnymalCore:
     # ------------------------------------------------------------------ step
     def step(self, actions: Any) -> StepOutput:
         """Advance every environment by one policy step (the stages of the module docstring). ``actions`` (N, 12):
-        numpy or a tensor (moved to the core's device); the output is in the core's kind
-        (:meth:`StepOutput.to_numpy` for the host)."""
+        numpy or a tensor (moved to the core's device); the output is in the core's kind (:meth:`StepOutput.to_numpy`
+        for the host). On CUDA the stages replay as one graph (:mod:`.step_graph`), the host's bookkeeping outside."""
+        a = self._array(actions, self.xp.float64)
+        if tuple(a.shape) != (self.num_envs, 12):
+            raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {tuple(a.shape)}")
+        graph, stages = self._step_graph, self._step_stages
+        output = stages(a) if graph is None else graph.step(stages, a, self._graph_key(), self.rng)
+        self.steps_taken += 1
+        self._steps_since_check += 1
+        if self.sync_free and self._steps_since_check >= self.check_every:  # the flags, read every check_every steps
+            self.raise_pending_errors()
+        return output
+
+    def _graph_key(self) -> tuple[Any, ...]:
+        """What a recorded step bakes in besides the arrays it reads (:mod:`.step_graph`): a new value of any of
+        these (a reconfiguration, a reseeded generator, another episode length) records the step again."""
+        return (id(self.config), id(self.rng), id(self.terrain), self.max_episode_steps, self.autoreset, self.truncate)
+
+    def _step_stages(self, a: Any) -> StepOutput:
+        """The stages of one step for actions ``a`` ((N, 12) float64, the core's kind): what a graph records."""
         cfg = self.config
-        action = self._actuate(actions)
+        action = self._actuate(a)
         diverged = self._simulate()
         self.episode_step += 1
         state = self._measure(diverged)
@@ -469,14 +487,8 @@ class AnymalCore:
             ids = self.xp.nonzero(done)[0]
             observation[ids] = self._observe_state(self._reset_rows(ResetRows.at(ids)), ids)
         privileged = self.privileged_observation() if cfg.privileged_observations else None
-        self.steps_taken += 1
-        if self.sync_free:  # flags, read every check_every steps
-            self._checks.record_step(
-                self._nonfinite_action, reward, (observation, final_observation), self.steps_taken - 1
-            )
-            self._steps_since_check += 1
-            if self._steps_since_check >= self.check_every:
-                self.raise_pending_errors()
+        if self.sync_free:  # flags, read every check_every steps (step)
+            self._checks.record_step(self._nonfinite_action, reward, (observation, final_observation))
         else:
             check_finite_outputs(cfg, reward, observation, final_observation)
         return StepOutput(observation, reward, terminated, truncated, info, final_observation, privileged)
@@ -485,13 +497,10 @@ class AnymalCore:
         """(N,) float64 of ``value``."""
         return self.xp.full(self.num_envs, value, dtype=self.xp.float64, device=self.device)
 
-    def _actuate(self, actions: Any) -> Any:
-        """Clip the actions (numpy or the core's kind), write the servo targets and this step's pushes; returns the
-        clipped actions (N, 12) float64."""
+    def _actuate(self, a: Any) -> Any:
+        """Clip the actions ((N, 12) float64, the core's kind), write the servo targets and this step's pushes;
+        returns the clipped actions."""
         xp = self.xp
-        a = self._array(actions, xp.float64)
-        if tuple(a.shape) != (self.num_envs, 12):
-            raise ValueError(f"actions must have shape (num_envs, 12) = ({self.num_envs}, 12), got {tuple(a.shape)}")
         usable = finite_mask(a)
         if self.sync_free:  # raised at the next read; 0 in its place keeps the physics finite until then
             self._nonfinite_action = ~xp.all(usable, axis=1)  # recorded with the outputs' checks

@@ -41,6 +41,8 @@ Kernels compile on first use (tens of seconds for ANYmal on one CPU core, cached
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import mujoco
@@ -167,6 +169,7 @@ class WarpPhysics(ModelConstants):
             raise TypeError(f"graphs must be True or False, got {graphs!r}")
         self.model = model
         self.graphs = graphs
+        self._inside_torch_capture = False  # launching into a step graph torch records (recorded_by_torch)
         self.num_envs = num_envs
         self.device = check_warp_device(device)
         default_nconmax, default_njmax = contact_budget(model)
@@ -198,6 +201,29 @@ class WarpPhysics(ModelConstants):
     def _on_device(self) -> Any:
         """The scope of every launch: Warp's device, on its own (blocking) stream there (module docstring)."""
         return wp.ScopedDevice(self.device)
+
+    @property
+    def on_cuda(self) -> bool:
+        """Whether the worlds are on a CUDA device (where a core's whole step can be recorded as one graph)."""
+        return bool(self.device.is_cuda)
+
+    def on_torch_stream(self, stream: Any) -> Any:
+        """A scope in which Warp launches on torch's CUDA ``stream`` (a core's step graph,
+        :mod:`~margin_rl.envs.step_graph`); enter it before torch begins its capture there."""
+        return wp.ScopedStream(wp.stream_from_torch(stream))
+
+    @contextmanager
+    def recorded_by_torch(self) -> Iterator[None]:
+        """Inside a capture torch began on the current stream (of :meth:`on_torch_stream`): the capture is
+        registered with Warp (external), so that MuJoCo Warp's solver loop records a conditional node instead of
+        reading the host, and this backend launches its kernels into it instead of replaying its own graphs."""
+        wp.capture_begin(force_module_load=False, external=True)
+        self._inside_torch_capture = True
+        try:
+            yield
+        finally:
+            self._inside_torch_capture = False
+            wp.capture_end()
 
     # ------------------------------------------------------------------ per-environment model fields
     def per_env_field(self, name: str) -> torch.Tensor:
@@ -264,7 +290,7 @@ class WarpPhysics(ModelConstants):
         """Run ``launch`` (Warp launches only): the first time recorded as graph ``key``, then its replay; eagerly
         where ``graphs`` is off."""
         with self._on_device():
-            if not self.graphs:
+            if not self.graphs or self._inside_torch_capture:  # eager, or recorded into the step's own graph
                 launch()
                 return
             if key not in self._graphs:

@@ -5,8 +5,8 @@ device to finish every operation queued before it: a step that read its checks e
 that round trip, and could not be replayed as a graph. There each check ORs its result into per-environment flags
 on the device, and :meth:`StepChecks.raise_pending` reads them all at once (one host read), at a cadence the caller
 sets (:attr:`~margin_rl.envs.core.AnymalCore.check_every`: the learner's rollout length), the same on Warp's CPU
-device as on a GPU. The error then names the check, the first step it failed at (the core's count of steps) and the
-environments.
+device as on a GPU. The error then names the check, the first step it failed at (counted on the device, one per
+recorded step: a step replayed as a graph bakes in no step number of the host's) and the environments.
 
 =====================  ===============================  ==========================================================
 flag                   raised as                        holds where
@@ -38,27 +38,30 @@ NO_STEP = np.iinfo(np.int64).max
 
 
 class StepChecks:
-    """Per-environment flags of :data:`CHECKS` ((N, checks) bool), and the first step each environment raised one,
-    kept in arrays of ``reference``'s kind and device."""
+    """Per-environment flags of :data:`CHECKS` ((N, checks) bool), the first step each environment raised one, and
+    the count of steps recorded (the step number a record gets: 0 for the first), kept in arrays of ``reference``'s
+    kind and device."""
 
     def __init__(self, reference: Any) -> None:
         xp = self._xp = namespace(reference)
         self._failed = xp.zeros((reference.shape[0], len(CHECKS)), dtype=xp.bool, device=reference.device)
         self._first_step = xp.full_like(reference, NO_STEP, dtype=xp.int64)
+        self._steps = xp.zeros((), dtype=xp.int64, device=reference.device)
 
-    def record(self, failed: Mapping[str, Any], step: int) -> None:
+    def record(self, failed: Mapping[str, Any]) -> None:
         """OR one step's failures (``failed[check]``: (N,) bool, where check ``check`` failed, for every check of
-        :data:`CHECKS`) into the flags, remembering ``step`` (the core's count of steps) where it is an environment's
-        first; a few operations for all the checks, and no host read."""
+        :data:`CHECKS`) into the flags, remembering the step's number where it is an environment's first, and count
+        the step; a few operations for all the checks, the same every step, and no host read."""
         xp = self._xp
         if set(failed) != set(CHECKS):
             raise ValueError(f"record takes every check of {list(CHECKS)}, got {sorted(failed)}")
         now = xp.stack([failed[check] for check in CHECKS], axis=1)
         self._failed |= now
         first = xp.any(now, axis=1) & (self._first_step == NO_STEP)
-        self._first_step[...] = xp.where(first, step, self._first_step)
+        self._first_step[...] = xp.where(first, self._steps, self._first_step)
+        self._steps += 1
 
-    def record_step(self, action_failed: Any, reward: Any, observations: Any, step: int) -> None:
+    def record_step(self, action_failed: Any, reward: Any, observations: Any) -> None:
         """Record a step's checks: ``action_failed`` (N,) where an action was NaN or inf, and where ``reward`` (N,) or
         any of ``observations`` (each (N, k)) is not finite."""
         xp = self._xp
@@ -68,7 +71,7 @@ class StepChecks:
             "observation": ~xp.all(finite_mask(outputs), axis=1),
             "reward": ~finite_mask(reward),
         }
-        self.record(failed, step)
+        self.record(failed)
 
     def raise_pending(self, hints: Mapping[str, str]) -> None:
         """Read the flags once; raise the first check that failed (in :data:`CHECKS` order) for the environments

@@ -4,6 +4,7 @@ that no non-finite output leaves a step."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,14 +67,18 @@ class StepOutput:
         edges of a core that computes on a device)."""
         if namespace(self.reward) is np:
             return self
+        return self.map_arrays(to_numpy)
+
+    def map_arrays(self, fn: Callable[[Array], Array]) -> StepOutput:
+        """This output with ``fn`` applied to every array (the info's included)."""
         return StepOutput(
-            to_numpy(self.observation),
-            to_numpy(self.reward),
-            to_numpy(self.terminated),
-            to_numpy(self.truncated),
-            {key: to_numpy(value) for key, value in self.info.items()},
-            to_numpy(self.final_observation),
-            None if self.privileged is None else to_numpy(self.privileged),
+            fn(self.observation),
+            fn(self.reward),
+            fn(self.terminated),
+            fn(self.truncated),
+            {key: fn(value) for key, value in self.info.items()},
+            fn(self.final_observation),
+            None if self.privileged is None else fn(self.privileged),
         )
 
 

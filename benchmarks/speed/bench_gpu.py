@@ -12,12 +12,17 @@ on flat ANYmal C); the rough recipe's environment has the terrain curriculum and
 Stages, in this order, each appended to ``<out>/bench_gpu.json`` as soon as it is measured (a run cut short keeps
 what it measured):
 
+0. ``graph_parity``: the environment's step replayed as one CUDA graph (``envs/step_graph.py``) against the same
+   step launched eagerly, same seed and actions, at the smallest ``--num-envs``; and two replayed cores against each
+   other (determinism). On Warp's CPU device both cores step eagerly (torch records no graph there).
 1. ``physics``: raw Warp physics of the environments' model: the same random actions written as servo targets, the
    decimated step (4 physics steps and the forward pass, a CUDA graph on a GPU), no environment work; env-steps/s
    at each ``--num-envs``.
 2. ``env``: the batched environment core on the same device (``AnymalCore(physics="warp")``: lambda, the learned
    margin's torch form, rewards, terminations, observations, resets), with the learned margin and with
-   ``margin="none"``, the same actions; env-steps/s and the ratio to stage 1.
+   ``margin="none"``, the same actions, each step replayed as one graph on a GPU; there also the learned margin's
+   step with its torch stages launched eagerly (``env_learned_eager``: the step before the step graph);
+   env-steps/s and the ratio to stage 1.
 3. ``ppo``: rsl-rl PPO end to end (``make_rsl_env(..., physics="warp")``, ``OnPolicyRunner.learn``: rollouts and
    updates, the learner on the same device), the recipe's PPO settings; env-steps/s.
 4. ``training``: the recipe on the environment (default: robust, ANYmal C), both variants (margin weight 0 and
@@ -72,6 +77,7 @@ SMOKE = {
     "train_steps": 8 * 24 * 2,
     "episodes": 2,
     "episode_steps": 10,
+    "parity_steps": 4,
 }
 """Every stage, small, on Warp's CPU device (what the CI test runs): checks the script, measures nothing useful."""
 
@@ -123,15 +129,20 @@ def timed_rate(step: Callable[[int], None], steps: int, num_envs: int, device: s
     return num_envs * steps / (time.perf_counter() - t0)
 
 
-def make_core(num_envs: int, device: str, margin: str, env_id: str = ROBOT_ID, recipe: str = RECIPE) -> Any:
+def make_core(
+    num_envs: int, device: str, margin: str, env_id: str = ROBOT_ID, recipe: str = RECIPE, step_graph: bool = True
+) -> Any:
     """The environment core of ``recipe`` on ``env_id`` (default: the robust recipe on flat ANYmal C) on the Warp
-    backend at ``device``."""
+    backend at ``device``; ``step_graph=False``: its torch stages launched eagerly on a GPU, the physics still
+    replaying its own Warp graphs (the step before ``envs/step_graph.py``)."""
     from margin_rl.envs.core import DEVICE_CHECK_STEPS, AnymalCore
     from margin_rl.train.commands.train import build_parser, spec_from_args
 
     spec, _, _ = spec_from_args(build_parser().parse_args(["--env", env_id, "--recipe", recipe]))
     config = spec.env_config.replace(margin=margin)
     core = AnymalCore(config, num_envs, seed=0, physics="warp", physics_device=device)
+    if not step_graph:
+        core._step_graph = None
     core.check_every = DEVICE_CHECK_STEPS  # its checks read once per rollout, as the rsl-rl adapter sets them
     core.reset(seed=0)
     return core
@@ -143,11 +154,11 @@ def random_actions(steps: int, num_envs: int, device: str) -> torch.Tensor:
 
 
 def step_runners(
-    num_envs: int, steps: int, device: str, env_id: str = ROBOT_ID, recipe: str = RECIPE
+    num_envs: int, steps: int, device: str, env_id: str = ROBOT_ID, recipe: str = RECIPE, step_graph: bool = True
 ) -> dict[str, Callable[[int], None]]:
     """Configuration -> ``run(k)``, policy step k of one fixed sequence of random actions: the raw physics (the
     servo targets the core would write, computed beforehand, then the decimated step) and the core with and without
-    the learned margin."""
+    the learned margin (``step_graph=False``: every core's torch stages eager)."""
     actions = random_actions(steps, num_envs, device)
     raw = make_core(num_envs, device, "none", env_id, recipe)
     physics, decimation = raw.physics, raw.config.decimation
@@ -157,11 +168,51 @@ def step_runners(
         physics.ctrl[:] = targets[k]
         physics.step(decimation)
 
-    def env_step(margin: str) -> Callable[[int], None]:
-        core = make_core(num_envs, device, margin, env_id, recipe)
+    def env_step(margin: str, graph: bool) -> Callable[[int], None]:
+        core = make_core(num_envs, device, margin, env_id, recipe, graph)
         return lambda k: core.step(actions[k])
 
-    return {"physics": raw_step, "env_learned": env_step("learned"), "env_no_margin": env_step("none")}
+    runners = {
+        "physics": raw_step,
+        "env_learned": env_step("learned", step_graph),
+        "env_no_margin": env_step("none", step_graph),
+    }
+    if step_graph and device.startswith("cuda"):  # the same steps, the torch stages launched one by one
+        runners["env_learned_eager"] = env_step("learned", False)
+    return runners
+
+
+def graph_parity(num_envs: int, steps: int, device: str, env_id: str = ROBOT_ID, recipe: str = RECIPE) -> dict:
+    """Stage 0: the step replayed as one graph (``envs/step_graph.py``) against the same step launched eagerly, from
+    the same seed and actions, step by step (largest differences of the observation, reward, done flags and the
+    physics' qpos); and two replayed cores against each other (whether a replayed run is deterministic)."""
+    actions = random_actions(steps, num_envs, device)
+    cores = {
+        "graph": make_core(num_envs, device, "learned", env_id, recipe),
+        "again": make_core(num_envs, device, "learned", env_id, recipe),
+        "eager": make_core(num_envs, device, "learned", env_id, recipe, step_graph=False),
+    }
+    rows = []
+    for k in range(steps):
+        out = {name: core.step(actions[k]) for name, core in cores.items()}
+        row = {}
+        for first, second in (("graph", "eager"), ("graph", "again")):
+            a, b = out[first], out[second]
+            row[f"{first}_vs_{second}"] = {
+                "observation": float((a.observation - b.observation).abs().max()),
+                "reward": float((a.reward - b.reward).abs().max()),
+                "done_differs": int(((a.terminated | a.truncated) != (b.terminated | b.truncated)).sum()),
+                "qpos": float((cores[first].physics.qpos - cores[second].physics.qpos).abs().max()),
+            }
+        rows.append(row)
+    recorder = cores["graph"]._step_graph
+    return {
+        "num_envs": num_envs,
+        "steps": steps,
+        "recorded": recorder is not None and recorder.recordings > 0,
+        "per_step": rows,
+        "max": {pair: {key: max(row[pair][key] for row in rows) for key in rows[0][pair]} for pair in rows[0]},
+    }
 
 
 def physics_and_env(
@@ -172,13 +223,14 @@ def physics_and_env(
     partial: Callable[[dict[str, Any]], None],
     env_id: str = ROBOT_ID,
     recipe: str = RECIPE,
+    step_graph: bool = True,
 ) -> dict[str, Any]:
     """Stages 1 and 2: raw physics and the environment core, interleaved per round, at every size (``partial``
-    is called with the results so far after each size)."""
+    is called with the results so far after each size; ``step_graph`` as in :func:`step_runners`)."""
     results: dict[str, Any] = {}
     for num_envs in sizes:
         clock = time.perf_counter()
-        runners = step_runners(num_envs, steps, device, env_id, recipe)
+        runners = step_runners(num_envs, steps, device, env_id, recipe, step_graph)
         setup = {"build_s": time.perf_counter() - clock}
         progress(f"{num_envs} environments: three cores built in {setup['build_s']:.1f} s")
         for name, run in runners.items():  # warm-up: kernels compiled and loaded, graphs captured, modules built
@@ -197,8 +249,7 @@ def physics_and_env(
         results[str(num_envs)] = {
             "env_steps_per_s": medians,
             "rounds": rates,
-            "env_learned_over_physics": medians["env_learned"] / medians["physics"],
-            "env_no_margin_over_physics": medians["env_no_margin"] / medians["physics"],
+            **{f"{name}_over_physics": medians[name] / medians["physics"] for name in medians if name != "physics"},
             "setup_seconds": setup,
         }
         del runners
@@ -314,9 +365,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=16, help="evaluation episodes per checkpoint (stage 4)")
     parser.add_argument("--runs-root", help="where stage 4's runs go (default: a temporary folder)")
     parser.add_argument(
-        "--stages", nargs="+", default=["physics_and_env", "ppo", "training"],
-        choices=["physics_and_env", "ppo", "training"],
+        "--stages", nargs="+", default=["graph_parity", "physics_and_env", "ppo", "training"],
+        choices=["graph_parity", "physics_and_env", "ppo", "training"],
     )  # fmt: skip
+    parser.add_argument("--parity-steps", type=int, default=50, help="steps compared in stage 0")
     args = parser.parse_args(argv)
     settings: dict[str, Any] = {
         "device": args.device,
@@ -330,6 +382,7 @@ def main(argv: list[str] | None = None) -> int:
         "train_steps": args.train_steps,
         "episodes": args.episodes,
         "episode_steps": None,  # whole 20 s episodes
+        "parity_steps": args.parity_steps,
     }
     if args.smoke:
         settings.update(SMOKE)
@@ -339,6 +392,13 @@ def main(argv: list[str] | None = None) -> int:
     record = Record(args.out / JSON_NAME, {**settings, "smoke": args.smoke})
     started = time.perf_counter()
     stages: dict[str, Callable[[Callable[[dict[str, Any]], None]], dict[str, Any]]] = {
+        "graph_parity": lambda partial: graph_parity(
+            min(settings["num_envs"]),
+            settings["parity_steps"],
+            settings["device"],
+            settings["env_id"],
+            settings["recipe"],
+        ),
         "physics_and_env": lambda partial: physics_and_env(
             settings["num_envs"],
             settings["steps"],
@@ -347,6 +407,7 @@ def main(argv: list[str] | None = None) -> int:
             partial,
             settings["env_id"],
             settings["recipe"],
+            step_graph="graph_parity" not in failed,  # a step graph that failed to record: eager cores only
         ),
         "ppo": lambda partial: ppo(
             settings["num_envs"],
@@ -361,7 +422,10 @@ def main(argv: list[str] | None = None) -> int:
     record.data["warp_cache_path"] = os.environ.get("WARP_CACHE_PATH")  # a kernel cache compiled ahead, if any
     with counting_compiles() as compiled:  # the modules Warp compiled here rather than loaded from its cache
         record.data["warp_modules_compiled"] = compiled  # the same list, filled as modules compile
-        failed = [name for name in stages if name in args.stages and not run_stage(record, name, stages[name])]
+        failed: list[str] = []
+        for name in (name for name in stages if name in args.stages):
+            if not run_stage(record, name, stages[name]):
+                failed.append(name)
     record.data["warp_compile_seconds"] = sum(seconds for _, seconds in compiled)
     record.data["wall_seconds"] = time.perf_counter() - started
     record.write()

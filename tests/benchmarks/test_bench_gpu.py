@@ -21,7 +21,10 @@ def test_every_stage_runs_small_on_warps_cpu_device_and_writes_its_record(tmp_pa
     record = json.loads((tmp_path / bench_gpu.JSON_NAME).read_text())
     assert record["settings"]["smoke"] and record["settings"]["device"] == "cpu" and record["gpu"] is None
     stages = record["stages"]
-    assert list(stages) == ["physics_and_env", "ppo", "training"]
+    assert list(stages) == ["graph_parity", "physics_and_env", "ppo", "training"]
+    parity = stages["graph_parity"]  # on Warp's CPU device both cores step eagerly: the same numbers, bit for bit
+    assert not parity["recorded"] and len(parity["per_step"]) == bench_gpu.SMOKE["parity_steps"]
+    assert all(value == 0 for pair in parity["max"].values() for value in pair.values()), parity["max"]
     for size in map(str, bench_gpu.SMOKE["num_envs"]):
         rates = stages["physics_and_env"][size]["env_steps_per_s"]
         assert set(rates) == {"physics", "env_learned", "env_no_margin"} and min(rates.values()) > 0
@@ -41,7 +44,7 @@ def test_every_stage_runs_small_on_warps_cpu_device_and_writes_its_record(tmp_pa
 def test_a_stage_that_raises_is_recorded_with_its_traceback_and_the_next_stage_still_runs(
     tmp_path: Path, monkeypatch
 ) -> None:
-    def broken_physics(sizes, steps, rounds, device, partial, env_id, recipe):
+    def broken_physics(sizes, steps, rounds, device, partial, env_id, recipe, step_graph):
         partial({"4": {"env_steps_per_s": {"physics": 1.0}}})  # one size measured before the failure
         raise RuntimeError("graph capture failed")
 

@@ -428,9 +428,9 @@ class AnymalCore:
         return output
 
     def _graph_key(self) -> tuple[Any, ...]:
-        """What a recorded step bakes in besides the arrays it reads (:mod:`.step_graph`): a new value of any of
-        these (a reconfiguration, a reseeded generator, another episode length) records the step again."""
-        return (id(self.config), id(self.rng), id(self.terrain), self.max_episode_steps, self.autoreset, self.truncate)
+        """What a recorded step bakes in besides its arrays (:mod:`.step_graph`): a change records it again."""
+        objects = (id(self.config), id(self.rng), id(self.terrain), getattr(self.physics, "recordings_invalidated", 0))
+        return (*objects, self.max_episode_steps, self.autoreset, self.truncate)
 
     def _step_stages(self, a: Any) -> StepOutput:
         """The stages of one step for actions ``a`` ((N, 12) float64, the core's kind): what a graph records."""

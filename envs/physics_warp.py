@@ -170,6 +170,9 @@ class WarpPhysics(ModelConstants):
         self.model = model
         self.graphs = graphs
         self._inside_torch_capture = False  # launching into a step graph torch records (recorded_by_torch)
+        self.recordings_invalidated = 0
+        """How many times this backend's arrays may have moved since it was built (:meth:`set_const`): a graph
+        recorded before holds stale addresses."""
         self.num_envs = num_envs
         self.device = check_warp_device(device)
         default_nconmax, default_njmax = contact_budget(model)
@@ -243,6 +246,7 @@ class WarpPhysics(ModelConstants):
         with self._on_device():
             mjw.set_const(self._model, self._data)
         self._graphs.clear()
+        self.recordings_invalidated += 1  # a core's step graph records again too
 
     # ------------------------------------------------------------------ operations
     def reset(self, ids: Any, keyframe: int) -> None:

@@ -140,7 +140,7 @@ def test_a_recorded_step_replays_the_eager_numbers_and_hands_out_copies() -> Non
     assert graphed.steps_taken == eager.steps_taken == len(actions) + 1
 
 
-def test_a_new_config_or_generator_records_the_step_again() -> None:
+def test_a_new_config_generator_episode_length_or_physics_arrays_record_the_step_again() -> None:
     core = _busy_core()
     recorders = _recorded(core)
     zeros = torch.zeros(N, 12)
@@ -159,6 +159,12 @@ def test_a_new_config_or_generator_records_the_step_again() -> None:
     core.step(zeros)
     core.step(zeros)
     assert len(recorders) == 4
+    core.physics.set_const()  # the physics' arrays may have moved
+    core.step(zeros)
+    core.step(zeros)
+    assert len(recorders) == 5
+    core.step(zeros)
+    assert len(recorders) == 5
 
 
 def test_a_replayed_step_names_the_step_of_a_nan_action() -> None:

@@ -2,7 +2,8 @@
 
 * what makes a step recordable: every step after the first dispatches the same operations with the same host
   numbers in their arguments (a graph bakes those in: a step counter of the host's, passed into an operation, would
-  freeze at the recorded step), random numbers drawn from the core's generator only (the one a recording registers);
+  freeze at the recorded step), random numbers drawn from the core's generator only (the one a recording registers),
+  no array made from host data;
 * :class:`StepGraph`'s sequence (an eager step, a recording, replays), the actions read at one address, the outputs
   copied out of the recording's memory, a new recording where the key changes, and the checks' step numbers counted
   on the device, with a recorder that replays by running the step again into outputs at fixed addresses (what a
@@ -74,6 +75,24 @@ def test_every_step_dispatches_the_same_operations_with_the_same_host_numbers() 
     random_ops = sum(1 for name, _ in traces[0] if name in {"rand", "randint", "exponential_", "normal_"})
     assert generators[0] == random_ops > 0 and len(set(generators)) == 1  # every draw from a generator passed in
     assert core.rng.generator.device == core.device
+
+
+def test_a_step_makes_no_array_from_host_data(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A copy from the host's pageable memory cannot be recorded in a CUDA graph: after the first step (which moves
+    the constants to the device once) a step converts only tensors."""
+    core = _busy_core()
+    calls: list[tuple[str, str]] = []
+    for name in ("as_tensor", "tensor", "from_numpy", "asarray"):
+        original = getattr(torch, name)
+
+        def spy(*args: Any, _original: Any = original, _name: str = name, **kwargs: Any) -> Any:
+            calls.append((_name, type(args[0]).__name__ if args else "none"))
+            return _original(*args, **kwargs)
+
+        monkeypatch.setattr(torch, name, spy)
+    for _ in range(3):
+        core.step(torch.zeros(N, 12))
+    assert calls and all(kind == "Tensor" for _, kind in calls), sorted(set(calls))
 
 
 class RerunRecorder:

@@ -487,7 +487,7 @@ class AnymalCore:
             ids = self.xp.nonzero(done)[0]
             observation[ids] = self._observe_state(self._reset_rows(ResetRows.at(ids)), ids)
         privileged = self.privileged_observation() if cfg.privileged_observations else None
-        if self.sync_free:  # flags, read every check_every steps (step)
+        if self.sync_free:  # flags, which step reads every check_every steps
             self._checks.record_step(self._nonfinite_action, reward, (observation, final_observation))
         else:
             check_finite_outputs(cfg, reward, observation, final_observation)

@@ -18,6 +18,7 @@ SHIPPED = {
     "anymal_b": "margin_rl/AnymalB-v1",
     "anymal_c": "margin_rl/AnymalC-v1",
     "anymal_c_rough": "margin_rl/AnymalC-Rough-v1",  # the rough recipe's perceptive policies, three seeds each
+    "anymal_c_field": "margin_rl/AnymalC-v1",  # the field's reward with and without the margin, five seeds each
 }
 FLAT = {name: env_id for name, env_id in SHIPPED.items() if "Rough" not in env_id}
 V0_RUN = Path(__file__).resolve().parents[2] / "fixtures" / "v0_run" / "config.json"
@@ -112,6 +113,18 @@ def test_bundled_policy_walks_at_the_commanded_speed(name: str, env_id: str, var
     s = report["summary"]
     assert s["fell"]["mean"] == 0.0, f"{name}: bundled {variant} policy (seed {seed}) fell within 4 s"
     assert s["velocity_error_mean"]["mean"] < 0.15, s["velocity_error_mean"]
+
+
+def test_field_bundle_card_is_the_five_seed_comparison_on_the_fields_reward() -> None:
+    """The field-reward bundle (docs/studies/field_reward.md): the field recipe's five seeds per variant at margin
+    weight 0.1, evaluated at the three commands in the four conditions with each cell's tests."""
+    card = load_bundle("anymal_c_field").card
+    assert card["settings"]["recipe"] == "field" and len(card["policies"]) == 10
+    assert sorted(card["settings"]["seeds"]) == [0, 1, 2, 3, 4]
+    assert {entry["margin_weight"] for entry in card["policies"]} == {0.0, 0.1}
+    cells = {(cell["condition"], cell["forward_velocity"]) for cell in card["grid"]}
+    assert {("nominal", 0.5), ("nominal", 1.0), ("friction_0.4", 0.75), ("mass_-20", 1.0)} <= cells
+    assert len(cells) == 11 and all("lin_acc_rms" in cell["statistics"] for cell in card["grid"])
 
 
 def test_rough_bundle_card_is_the_three_seed_comparison_on_a_fixed_terrain() -> None:

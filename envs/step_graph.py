@@ -17,6 +17,8 @@ into its operations (the checks count steps on the device). What this module add
   launches its kernels into this capture instead of replaying its own graphs
   (:meth:`~margin_rl.envs.physics_warp.WarpPhysics.recorded_by_torch`); the core's generator registered with the
   graph, so that each replay draws new numbers.
+* **If recording fails** (an operation torch or the driver cannot record), :meth:`StepGraph.step` warns once with
+  the reason and steps eagerly from then on: training goes on, slower, with the same numbers.
 * **What a replay returns.** The step's outputs live in the graph's memory and the next replay overwrites them, so
   the caller gets copies (one per output array): a learner keeps an observation across the next step (rsl-rl's
   transition holds it until the step after).
@@ -28,6 +30,7 @@ physics option ``graphs=False`` (debugging: every operation launched from Python
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -59,18 +62,31 @@ class StepGraph:
         self._actions: Any = None
         self.recordings = 0
         """How many times a step was recorded (a new key records again)."""
+        self.failure: str | None = None
+        """Why recording failed (the exception), after which every step runs eagerly; None while it has not."""
 
     def step(self, body: Callable[[Any], StepOutput], actions: Any, key: Any, rng: Any) -> StepOutput:
         """One step of ``body(actions)``: eager, recorded or replayed (module docstring). ``actions``: (N, 12) float64
         on the core's device; ``key``: what the recording bakes in (compared with ``!=``); ``rng``: the core's
         :class:`~margin_rl.arrays.TorchRandom`, whose generator a recording registers."""
-        if key != self._key:  # nothing recorded for this key: an eager step first, which sets up what is lazy
+        if self.failure is not None or key != self._key:  # eager: recording failed, or a new key's first step
             self._key, self._recorder = key, None
             return body(actions)
         if self._recorder is None:
             self._actions = actions.clone()  # the address the recording reads the actions at
             recorder = self._new_recorder(rng.generator)
-            recorder.capture(lambda: body(self._actions))
+            try:
+                recorder.capture(lambda: body(self._actions))
+            except Exception as exc:  # a recording runs nothing on the device: the step can still run eagerly
+                self.failure = f"{type(exc).__name__}: {exc}"
+                warnings.warn(
+                    f"the environment step could not be recorded as a CUDA graph ({self.failure}); it runs eagerly "
+                    "from now on, every operation launched from Python (slower, the same numbers). Report it with "
+                    "the traceback; physics_options={'graphs': False} turns every graph off.",
+                    RuntimeWarning,
+                    stacklevel=3,
+                )
+                return body(actions)
             self._recorder = recorder
             self.recordings += 1
         else:

@@ -182,10 +182,18 @@ def step_runners(
     return runners
 
 
-def graph_parity(num_envs: int, steps: int, device: str, env_id: str = ROBOT_ID, recipe: str = RECIPE) -> dict:
+def graph_parity(
+    num_envs: int,
+    steps: int,
+    device: str,
+    partial: Callable[[dict[str, Any]], None],
+    env_id: str = ROBOT_ID,
+    recipe: str = RECIPE,
+) -> dict:
     """Stage 0: the step replayed as one graph (``envs/step_graph.py``) against the same step launched eagerly, from
     the same seed and actions, step by step (largest differences of the observation, reward, done flags and the
-    physics' qpos); and two replayed cores against each other (whether a replayed run is deterministic)."""
+    physics' qpos); and two replayed cores against each other (whether a replayed run is deterministic). Raises,
+    after ``partial`` got the rows, where the step could not be recorded (it then ran eagerly)."""
     actions = random_actions(steps, num_envs, device)
     cores = {
         "graph": make_core(num_envs, device, "learned", env_id, recipe),
@@ -206,13 +214,18 @@ def graph_parity(num_envs: int, steps: int, device: str, env_id: str = ROBOT_ID,
             }
         rows.append(row)
     recorder = cores["graph"]._step_graph
-    return {
+    result = {
         "num_envs": num_envs,
         "steps": steps,
         "recorded": recorder is not None and recorder.recordings > 0,
+        "failure": None if recorder is None else recorder.failure,
         "per_step": rows,
         "max": {pair: {key: max(row[pair][key] for row in rows) for key in rows[0][pair]} for pair in rows[0]},
     }
+    if result["failure"] is not None:
+        partial(result)
+        raise RuntimeError(f"the step was not recorded as a CUDA graph: {result['failure']}")
+    return result
 
 
 def physics_and_env(
@@ -396,6 +409,7 @@ def main(argv: list[str] | None = None) -> int:
             min(settings["num_envs"]),
             settings["parity_steps"],
             settings["device"],
+            partial,
             settings["env_id"],
             settings["recipe"],
         ),

@@ -14,6 +14,7 @@ The CUDA recorder itself runs only on a GPU: ``benchmarks/speed/bench_gpu.py`` c
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -200,6 +201,27 @@ def test_a_replayed_step_names_the_step_of_a_nan_action() -> None:
     core.step(actions)
     with pytest.raises(ValueError, match=r"action is not finite in 1 environment\(s\) \[1\], first at step 3"):
         core.step(actions)
+
+
+class FailingRecorder(RerunRecorder):
+    def capture(self, body: Callable[[], StepOutput]) -> None:
+        raise RuntimeError("operation not permitted when stream is capturing")
+
+
+def test_a_step_that_cannot_be_recorded_warns_once_and_runs_eagerly() -> None:
+    eager, graphed = _busy_core(), _busy_core()
+    graphed._step_graph = StepGraph(lambda generator: FailingRecorder())
+    actions = torch.as_tensor(np.random.default_rng(5).uniform(-1, 1, (6, N, 12)))
+    expected, got = eager.step(actions[0]), graphed.step(actions[0])  # eager: the key's first step
+    with pytest.warns(RuntimeWarning, match=r"could not be recorded.*not permitted when stream is capturing"):
+        expected, got = eager.step(actions[1]), graphed.step(actions[1])
+    torch.testing.assert_close(got.observation, expected.observation, rtol=0, atol=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once only
+        for a in actions[2:]:
+            expected, got = eager.step(a), graphed.step(a)
+            torch.testing.assert_close(got.reward, expected.reward, rtol=0, atol=0)
+    assert graphed._step_graph.failure is not None and graphed._step_graph.recordings == 0
 
 
 def test_only_a_cuda_device_records_steps() -> None:

@@ -74,15 +74,15 @@ class StepGraph:
             return body(actions)
         if self._recorder is None:
             self._actions = actions.clone()  # the address the recording reads the actions at
-            recorder = self._new_recorder(rng.generator)
-            try:
+            try:  # building the recorder too: a torch without what it needs fails here
+                recorder = self._new_recorder(rng.generator)
                 recorder.capture(lambda: body(self._actions))
             except Exception as exc:  # a recording runs nothing on the device: the step can still run eagerly
                 self.failure = f"{type(exc).__name__}: {exc}"
                 warnings.warn(
                     f"the environment step could not be recorded as a CUDA graph ({self.failure}); it runs eagerly "
-                    "from now on, every operation launched from Python (slower, the same numbers). Report it with "
-                    "the traceback; physics_options={'graphs': False} turns every graph off.",
+                    "from now on, every operation launched from Python (slower, the same numbers); "
+                    "physics_options={'graphs': False} turns every graph off.",
                     RuntimeWarning,
                     stacklevel=3,
                 )

@@ -429,8 +429,8 @@ class AnymalCore:
 
     def _graph_key(self) -> tuple[Any, ...]:
         """What a recorded step bakes in besides its arrays (:mod:`.step_graph`): a change records it again."""
-        objects = (id(self.config), id(self.rng), id(self.terrain), getattr(self.physics, "recordings_invalidated", 0))
-        return (*objects, self.max_episode_steps, self.autoreset, self.truncate)
+        moved = getattr(self.physics, "recordings_invalidated", 0)
+        return (self.config, self.rng, self.terrain, moved, self.max_episode_steps, self.autoreset, self.truncate)
 
     def _step_stages(self, a: Any) -> StepOutput:
         """The stages of one step for actions ``a`` ((N, 12) float64, the core's kind): what a graph records."""

@@ -57,7 +57,7 @@ class StepGraph:
 
     def __init__(self, new_recorder: Callable[[Any], StepRecorder]) -> None:
         self._new_recorder = new_recorder
-        self._key: Any = None
+        self._key: tuple[Any, ...] | None = None
         self._recorder: StepRecorder | None = None
         self._actions: Any = None
         self.recordings = 0
@@ -67,9 +67,10 @@ class StepGraph:
 
     def step(self, body: Callable[[Any], StepOutput], actions: Any, key: Any, rng: Any) -> StepOutput:
         """One step of ``body(actions)``: eager, recorded or replayed (module docstring). ``actions``: (N, 12) float64
-        on the core's device; ``key``: what the recording bakes in (compared with ``!=``); ``rng``: the core's
+        on the core's device; ``key``: a tuple of what the recording bakes in (objects, held here so that they stay
+        themselves, compared by identity; numbers by value); ``rng``: the core's
         :class:`~margin_rl.arrays.TorchRandom`, whose generator a recording registers."""
-        if self.failure is not None or key != self._key:  # eager: recording failed, or a new key's first step
+        if self.failure is not None or _changed(self._key, key):  # eager: recording failed, or a new key's first step
             self._key, self._recorder = key, None
             return body(actions)
         if self._recorder is None:
@@ -93,6 +94,14 @@ class StepGraph:
             self._actions.copy_(actions)
         self._recorder.replay()
         return self._recorder.outputs.map_arrays(lambda array: array.clone())
+
+
+def _changed(old: tuple[Any, ...] | None, new: tuple[Any, ...]) -> bool:
+    """Whether key ``new`` differs from ``old``: an object by identity (a config replaced by an equal one still bakes
+    in the same numbers, but identity is what the core can vouch for), a number or flag by value."""
+    if old is None or len(old) != len(new):
+        return True
+    return any(a is not b and not (isinstance(a, (int, float)) and a == b) for a, b in zip(old, new, strict=True))
 
 
 class CudaStepRecorder:

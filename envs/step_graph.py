@@ -8,8 +8,9 @@ into its operations (the checks count steps on the device). What this module add
 
 * **When.** :meth:`StepGraph.step` runs the first step after a (re)recording eagerly (lazy set-up: the network's
   weights, constants moved to the device, kernels loaded), records the next one and replays it, then replays. The
-  core gives a key of what a recording bakes in besides its arrays (its config object, generator, terrain, episode
-  length, autoreset and truncation); a new key records again. A pickled core is rebuilt without its graph.
+  core gives a key of what a recording bakes in besides its arrays (its config object, generator, terrain, the
+  physics' count of ``set_const`` calls, episode length, autoreset and truncation); a new key records again. A
+  pickled core is rebuilt without its graph.
 * **How, on CUDA** (:class:`CudaStepRecorder`, the pattern of Warp's own torch interop tests): a non-blocking side
   stream shared by torch and Warp (torch refuses to capture on a blocking stream, and Warp's default stream is
   one); torch's capture begun there and registered with Warp as external, so MuJoCo Warp's solver loop

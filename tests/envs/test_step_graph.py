@@ -115,9 +115,8 @@ class RerunRecorder:
         if self._outputs is None:
             self._outputs = result
             return
-        fresh = iter(_arrays(result))
-        for fixed in _arrays(self._outputs):
-            fixed.copy_(next(fresh))
+        for fixed, fresh in zip(_arrays(self._outputs), _arrays(result), strict=True):
+            fixed.copy_(fresh)
 
     @property
     def outputs(self) -> StepOutput:
@@ -126,8 +125,14 @@ class RerunRecorder:
 
 
 def _arrays(output: StepOutput) -> list[torch.Tensor]:
+    """Every array of ``output``, in :meth:`StepOutput.map_arrays`'s order."""
     found: list[torch.Tensor] = []
-    output.map_arrays(lambda array: found.append(array) or array)
+
+    def keep(array: torch.Tensor) -> torch.Tensor:
+        found.append(array)
+        return array
+
+    output.map_arrays(keep)
     return found
 
 

@@ -11,15 +11,26 @@ each of K₀, 10 K₀ and 100 K₀::
 
     python benchmarks/studies/field_control_weight.py --margin-runs runs/field/c_mw0.1_s0 runs/field/c_mw0.1_s1 \\
         --baseline-runs runs/field/c_mw0_s0 runs/field/c_mw0_s1 [--episodes 4] [--json OUT]
+
+Once those have trained, ``--choose REPORT`` applies the rule's second half (:func:`choose_control_weight`) to a
+``compare`` report of the scanned control runs (margin weight 0: its "without margin" variant) against the margin
+variant's runs (its "with margin" variant, whose mean linear acceleration RMS is the target)::
+
+    python -m margin_rl.train compare --runs runs/field/c_ctrl*_s0 runs/field/c_mw0.1_s{0,1,2,3,4} \\
+        --env margin_rl/AnymalC-v1 --eval-episodes 64 --eval-seed 5000 --forward-velocity 0.75 --out OUT
+    python benchmarks/studies/field_control_weight.py --choose OUT/compare.json [--json CHOICE]
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import sys
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -28,6 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository r
 RULE_COMMAND = 0.75  # [m/s]
 EVALUATION_SEED = 5000  # the study's evaluation seed, not a training seed
 SCAN = (1.0, 10.0, 100.0)  # multiples of K₀ trained, one seed each
+MATCH_TOLERANCE = 0.10  # a scanned K matches when its linear acceleration RMS is within ±10 % of the target's
 
 
 @dataclass(frozen=True)
@@ -61,6 +73,79 @@ def control_weight(margin_terms: np.ndarray, accelerations: np.ndarray) -> Contr
     return ControlWeight(magnitude, squared, k0, tuple(k0 * m for m in SCAN), steps)
 
 
+@dataclass(frozen=True)
+class ControlChoice:
+    """The control's weight K, chosen from the scan by the rule (:func:`choose_control_weight`)."""
+
+    k: float  # the penalty weight the control's three seeds train with [per (m/s²)²]
+    how: str  # "matched" (a scanned K within the tolerance), "interpolated" (log K between two) or "closest"
+    target: float  # the margin variant's mean linear acceleration RMS [m/s²]
+    measured: float | None  # the chosen K's linear acceleration RMS, when it was scanned (None: interpolated)
+    relative_mismatch: float | None  # (measured − target) / target, when scanned
+
+
+def choose_control_weight(
+    target: float, scanned: Mapping[float, float], tolerance: float = MATCH_TOLERANCE
+) -> ControlChoice:
+    """The control's K from the scan ``scanned`` {K: linear acceleration RMS [m/s²] of its seed-0 policy} and the
+    margin variant's mean ``target`` [m/s²], by the rule written before the scan (docs/studies/field_reward.md):
+
+    1. The K whose acceleration lies within ``tolerance`` (relative) of the target; of several, the closest.
+    2. Else, K interpolated linearly in log K between the two neighbouring scanned weights (sorted by K) whose
+       accelerations bracket the target, a(K₁) and a(K₂) on either side: log K = log K₁ + (target − a₁) / (a₂ − a₁)
+       · (log K₂ − log K₁); of several bracketing pairs (a scan that is not monotonic), the one with the smallest K.
+    3. Else (every scanned K on one side of the target), the closest, its mismatch reported.
+
+    Raises:
+        ValueError: an empty scan, a weight that is not positive, or a non-finite or non-positive acceleration or
+            target.
+    """
+    if not scanned:
+        raise ValueError("the scan is empty: give the linear acceleration RMS of at least one scanned weight K")
+    values = [target, tolerance, *scanned, *scanned.values()]
+    if not all(np.isfinite(v) and v > 0 for v in values):
+        raise ValueError(
+            f"need a positive target, tolerance, weights and accelerations; got target {target}, tolerance "
+            f"{tolerance}, scan {dict(scanned)}"
+        )
+    ks = sorted(scanned)
+
+    def scanned_choice(k: float, how: str) -> ControlChoice:
+        return ControlChoice(k, how, target, scanned[k], (scanned[k] - target) / target)
+
+    closest = min(ks, key=lambda k: abs(scanned[k] - target))
+    if abs(scanned[closest] - target) <= tolerance * target:
+        return scanned_choice(closest, "matched")
+    for low, high in itertools.pairwise(ks):
+        a_low, a_high = scanned[low], scanned[high]
+        if min(a_low, a_high) <= target <= max(a_low, a_high):
+            fraction = (target - a_low) / (a_high - a_low)
+            k = float(np.exp(np.log(low) + fraction * (np.log(high) - np.log(low))))
+            return ControlChoice(k, "interpolated", target, None, None)
+    return scanned_choice(closest, "closest")
+
+
+def scan_of_report(report: Mapping[str, Any]) -> tuple[float, dict[float, float]]:
+    """(target, scan) of a ``compare`` report of the scanned control runs ("without margin") against the margin
+    variant ("with margin"), main cell: the target is the margin variant's mean ``lin_acc_rms``, each control run's K
+    its ``reward_params.base_acceleration`` (read from its ``config.json``).
+
+    Raises:
+        ValueError: a control run without a penalty, two runs with the same K, or a run without its folder.
+    """
+    target = float(report["variants"]["with margin"]["mean"]["lin_acc_rms"])
+    scan: dict[float, float] = {}
+    for run in report["variants"]["without margin"]["runs"]:
+        if run["run_dir"] is None:
+            raise ValueError(f"{run['policy']}: not a training run's folder, so its penalty weight is unknown")
+        config = json.loads((Path(run["run_dir"]) / "config.json").read_text())
+        k = float(config["env_config"]["reward_params"].get("base_acceleration", 0.0))
+        if k <= 0 or k in scan:
+            raise ValueError(f"{run['run_dir']}: penalty weight {k} is not positive, or was scanned twice")
+        scan[k] = float(run["metrics"]["lin_acc_rms"])
+    return target, scan
+
+
 def episode_steps(run: Path, episodes: int) -> tuple[np.ndarray, np.ndarray]:
     """(margin terms (n,), CoM accelerations (n, 3)) of ``episodes`` deterministic nominal episodes of ``run``'s final
     policy at :data:`RULE_COMMAND`, after each episode's warm-up second."""
@@ -82,11 +167,25 @@ def episode_steps(run: Path, episodes: int) -> tuple[np.ndarray, np.ndarray]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--margin-runs", nargs="+", type=Path, required=True)
-    parser.add_argument("--baseline-runs", nargs="+", type=Path, required=True)
+    parser.add_argument("--margin-runs", nargs="+", type=Path)
+    parser.add_argument("--baseline-runs", nargs="+", type=Path)
     parser.add_argument("--episodes", type=int, default=4, help="evaluation episodes (seeds) per run")
+    parser.add_argument("--choose", type=Path, metavar="REPORT", help="choose K from a compare report of the scan")
     parser.add_argument("--json", type=Path, help="write the result here")
     args = parser.parse_args(argv)
+    if args.choose is not None:
+        if args.margin_runs or args.baseline_runs:
+            parser.error("--choose reads a compare report: give it alone (with --json)")
+        try:
+            target, scan = scan_of_report(json.loads(args.choose.read_text()))
+            choice = choose_control_weight(target, scan)
+        except (OSError, KeyError, ValueError) as exc:
+            parser.error(f"--choose {args.choose}: {exc}")
+        print(f"target {target:.3f} m/s^2; scan {scan}; K = {choice.k:.3e} ({choice.how})")
+        _write_json(args.json, {**asdict(choice), "scan": {str(k): a for k, a in scan.items()}})
+        return 0
+    if not (args.margin_runs and args.baseline_runs):
+        parser.error("give --margin-runs and --baseline-runs (K₀), or --choose REPORT (the control's K)")
     missing = [str(r) for r in (*args.margin_runs, *args.baseline_runs) if not (r / "final_model.pt").is_file()]
     if missing:
         parser.error(f"no final_model.pt in {missing}: give finished runs")
@@ -99,12 +198,16 @@ def main(argv: list[str] | None = None) -> int:
         f"mean |margin term| {result.margin_term_abs:.3e} per step, baseline mean |a|^2 {result.acceleration_sq:.2f} "
         f"(m/s^2)^2 -> K0 {result.k0:.3e}; train K = {', '.join(f'{k:.3e}' for k in result.scan)}"
     )
-    if args.json:
-        report = {**asdict(result), "margin_runs": [str(r) for r in args.margin_runs]}
-        report["baseline_runs"] = [str(r) for r in args.baseline_runs]
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report, indent=1) + "\n")
+    report = {**asdict(result), "margin_runs": [str(r) for r in args.margin_runs]}
+    _write_json(args.json, {**report, "baseline_runs": [str(r) for r in args.baseline_runs]})
     return 0
+
+
+def _write_json(path: Path | None, report: dict[str, Any]) -> None:
+    if path is not None:
+        from margin_rl.train.runs import write_json  # atomic
+
+        write_json(path, report)
 
 
 if __name__ == "__main__":

@@ -18,9 +18,13 @@ SHIPPED = {
     "anymal_b": "margin_rl/AnymalB-v1",
     "anymal_c": "margin_rl/AnymalC-v1",
     "anymal_c_rough": "margin_rl/AnymalC-Rough-v1",  # the rough recipe's perceptive policies, three seeds each
-    "anymal_c_field": "margin_rl/AnymalC-v1",  # the field's reward with and without the margin, five seeds each
+    "anymal_b_field": "margin_rl/AnymalB-v1",  # the field's reward with and without the margin, five seeds each
+    "anymal_c_field": "margin_rl/AnymalC-v1",
 }
 FLAT = {name: env_id for name, env_id in SHIPPED.items() if "Rough" not in env_id}
+SLOW = {("anymal_b_field", "with margin"): 0.40}
+"""The velocity error [m/s] a bundle's first policy is held to where it is known to walk slower than commanded (else
+0.15): B's field-reward margin policy of seed 0 walks 0.42 m/s at 0.75 (docs/studies/field_reward.md)."""
 V0_RUN = Path(__file__).resolve().parents[2] / "fixtures" / "v0_run" / "config.json"
 """The config.json of a run stored under a retired -v0 id (the first comparison's, margin seed 0): runs and bundles
 of that time must still resume and evaluate."""
@@ -112,13 +116,14 @@ def test_bundled_policy_walks_at_the_commanded_speed(name: str, env_id: str, var
     report, _ = evaluate(path, episodes=2, seed=7, forward_velocity=0.75, max_steps=200, out_dir=tmp_path)
     s = report["summary"]
     assert s["fell"]["mean"] == 0.0, f"{name}: bundled {variant} policy (seed {seed}) fell within 4 s"
-    assert s["velocity_error_mean"]["mean"] < 0.15, s["velocity_error_mean"]
+    assert s["velocity_error_mean"]["mean"] < SLOW.get((name, variant), 0.15), s["velocity_error_mean"]
 
 
-def test_field_bundle_card_is_the_five_seed_comparison_on_the_fields_reward() -> None:
-    """The field-reward bundle (docs/studies/field_reward.md): the field recipe's five seeds per variant at margin
+@pytest.mark.parametrize("name", ["anymal_b_field", "anymal_c_field"])
+def test_field_bundle_card_is_the_five_seed_comparison_on_the_fields_reward(name: str) -> None:
+    """The field-reward bundles (docs/studies/field_reward.md): the field recipe's five seeds per variant at margin
     weight 0.1, evaluated at the three commands in the four conditions with each cell's tests."""
-    card = load_bundle("anymal_c_field").card
+    card = load_bundle(name).card
     assert card["settings"]["recipe"] == "field" and len(card["policies"]) == 10
     assert sorted(card["settings"]["seeds"]) == [0, 1, 2, 3, 4]
     assert {entry["margin_weight"] for entry in card["policies"]} == {0.0, 0.1}

@@ -75,8 +75,8 @@ class MatchedCommand:
 
 
 def speed_matched(report: dict[str, Any]) -> list[MatchedCommand]:
-    """The speed-matched comparison of a ``compare`` report (or card) at each of its nominal commands (module
-    docstring).
+    """The speed-matched comparison of a ``compare`` report at each of its nominal commands (module docstring; a
+    bundle card keeps no policy's grid metrics).
 
     Raises:
         ValueError: fewer than two nominal commands, or variants whose policies differ between cells.

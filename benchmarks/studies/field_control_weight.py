@@ -40,6 +40,7 @@ RULE_COMMAND = 0.75  # [m/s]
 EVALUATION_SEED = 5000  # the study's evaluation seed, not a training seed
 SCAN = (1.0, 10.0, 100.0)  # multiples of K₀ trained, one seed each
 MATCH_TOLERANCE = 0.10  # a scanned K matches when its linear acceleration RMS is within ±10 % of the target's
+WALKING_FALLS = 0.01  # the study's gate: a policy walks when at most 1 % of its evaluation episodes end in a fall
 
 
 @dataclass(frozen=True)
@@ -125,25 +126,51 @@ def choose_control_weight(
     return scanned_choice(closest, "closest")
 
 
-def scan_of_report(report: Mapping[str, Any]) -> tuple[float, dict[float, float]]:
-    """(target, scan) of a ``compare`` report of the scanned control runs ("without margin") against the margin
-    variant ("with margin"), main cell: the target is the margin variant's mean ``lin_acc_rms``, each control run's K
-    its ``reward_params.base_acceleration`` (read from its ``config.json``).
+@dataclass(frozen=True)
+class ControlScan:
+    """The scan read off a ``compare`` report (:func:`scan_of_report`)."""
+
+    target: float  # the margin variant's mean linear acceleration RMS [m/s²]
+    accelerations: dict[float, float]  # {K: linear acceleration RMS of its seed-0 policy [m/s²]}
+    not_walking: dict[float, dict[str, Any]]  # {K: its metrics} of policies that fail the walking gate
+    falls: dict[float, float]  # {K: share of its evaluation episodes ending in a fall}, every scanned K
+
+
+def scan_of_report(report: Mapping[str, Any]) -> ControlScan:
+    """The scan in a ``compare`` report of the scanned control runs ("without margin") against the margin variant
+    ("with margin"), main cell: the target is the margin variant's mean ``lin_acc_rms``, each control run's K its
+    ``reward_params.base_acceleration`` (read from its ``config.json``).
+
+    A K whose policy does not walk is set apart in ``not_walking``, reported and never chosen: a control is compared
+    with the margin variant on falls, pushes and gait, so it must pass the study's walking gate (at most
+    :data:`WALKING_FALLS` of its episodes ending in a fall; a policy that falls in every episode before the warm-up
+    second ends has no acceleration at all). The rule as first written did not say this; it was added when the
+    scan's 10 K₀ and 100 K₀ policies fell in every episode (docs/studies/field_reward.md, "The control").
 
     Raises:
-        ValueError: a control run without a penalty, two runs with the same K, or a run without its folder.
+        ValueError: a control run without a penalty, two runs with the same K, a run without its folder, or no
+            scanned K with an acceleration.
     """
     target = float(report["variants"]["with margin"]["mean"]["lin_acc_rms"])
-    scan: dict[float, float] = {}
+    accelerations: dict[float, float] = {}
+    not_walking: dict[float, dict[str, Any]] = {}
+    falls: dict[float, float] = {}
     for run in report["variants"]["without margin"]["runs"]:
         if run["run_dir"] is None:
             raise ValueError(f"{run['policy']}: not a training run's folder, so its penalty weight is unknown")
         config = json.loads((Path(run["run_dir"]) / "config.json").read_text())
         k = float(config["env_config"]["reward_params"].get("base_acceleration", 0.0))
-        if k <= 0 or k in scan:
+        if k <= 0 or k in falls:
             raise ValueError(f"{run['run_dir']}: penalty weight {k} is not positive, or was scanned twice")
-        scan[k] = float(run["metrics"]["lin_acc_rms"])
-    return target, scan
+        metrics = run["metrics"]
+        falls[k] = float(metrics["fell"])
+        if metrics["lin_acc_rms"] is None or not falls[k] <= WALKING_FALLS:
+            not_walking[k] = {name: metrics.get(name) for name in ("fell", "velocity_error_mean", "lin_acc_rms")}
+        else:
+            accelerations[k] = float(metrics["lin_acc_rms"])
+    if not accelerations:
+        raise ValueError(f"no scanned weight left a policy that walks past the warm-up: {sorted(not_walking)}")
+    return ControlScan(target, accelerations, not_walking, falls)
 
 
 def episode_steps(run: Path, episodes: int) -> tuple[np.ndarray, np.ndarray]:
@@ -177,12 +204,19 @@ def main(argv: list[str] | None = None) -> int:
         if args.margin_runs or args.baseline_runs:
             parser.error("--choose reads a compare report: give it alone (with --json)")
         try:
-            target, scan = scan_of_report(json.loads(args.choose.read_text()))
-            choice = choose_control_weight(target, scan)
+            scan = scan_of_report(json.loads(args.choose.read_text()))
+            choice = choose_control_weight(scan.target, scan.accelerations)
         except (OSError, KeyError, ValueError) as exc:
             parser.error(f"--choose {args.choose}: {exc}")
-        print(f"target {target:.3f} m/s^2; scan {scan}; K = {choice.k:.3e} ({choice.how})")
-        _write_json(args.json, {**asdict(choice), "scan": {str(k): a for k, a in scan.items()}})
+        apart = f"; set apart (fails the walking gate): {scan.not_walking}" if scan.not_walking else ""
+        print(f"target {scan.target:.3f} m/s^2; scan {scan.accelerations}{apart}; K = {choice.k:.3e} ({choice.how})")
+        record = {
+            **asdict(choice),
+            "scan": {str(k): a for k, a in scan.accelerations.items()},
+            "not_walking": {str(k): m for k, m in scan.not_walking.items()},
+            "falls": {str(k): f for k, f in scan.falls.items()},
+        }
+        _write_json(args.json, record)
         return 0
     if not (args.margin_runs and args.baseline_runs):
         parser.error("give --margin-runs and --baseline-runs (K₀), or --choose REPORT (the control's K)")

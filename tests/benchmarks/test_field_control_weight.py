@@ -95,11 +95,37 @@ def test_the_scan_is_read_from_a_compare_report_and_each_runs_config(tmp_path: P
         run = tmp_path / f"ctrl{k}"
         run.mkdir()
         (run / "config.json").write_text(json.dumps({"env_config": {"reward_params": {"base_acceleration": k}}}))
-        runs.append({"run_dir": str(run), "policy": str(run / "final_model.pt"), "metrics": {"lin_acc_rms": acc}})
+        metrics = {"lin_acc_rms": acc, "fell": 0.0}
+        runs.append({"run_dir": str(run), "policy": str(run / "final_model.pt"), "metrics": metrics})
     report = {
         "variants": {"without margin": {"runs": runs}, "with margin": {"mean": {"lin_acc_rms": 2.33}}},
     }
-    assert scan_of_report(report) == (2.33, {8e-5: 2.6, 8e-4: 2.4})
+    scan = scan_of_report(report)
+    assert (scan.target, scan.accelerations, scan.not_walking) == (2.33, {8e-5: 2.6, 8e-4: 2.4}, {})
     runs[1]["run_dir"] = runs[0]["run_dir"]  # the same weight twice
     with pytest.raises(ValueError, match="scanned twice"):
+        scan_of_report(report)
+
+
+def test_a_weight_whose_policy_does_not_walk_is_set_apart_not_chosen(tmp_path: Path) -> None:
+    runs = []
+    # 8e-4: closer to the target but falls in 2 % of its episodes; 8e-3: every episode over within the first second
+    for k, acc, fell in ((8e-5, 1.93, 0.0), (8e-4, 2.3, 0.02), (8e-3, None, 1.0)):
+        run = tmp_path / f"ctrl{k}"
+        run.mkdir()
+        (run / "config.json").write_text(json.dumps({"env_config": {"reward_params": {"base_acceleration": k}}}))
+        metrics = {"lin_acc_rms": acc, "fell": fell, "velocity_error_mean": 0.6 if acc is None else 0.05}
+        runs.append({"run_dir": str(run), "policy": str(run / "final_model.pt"), "metrics": metrics})
+    report = {"variants": {"without margin": {"runs": runs}, "with margin": {"mean": {"lin_acc_rms": 2.33}}}}
+    scan = scan_of_report(report)
+    assert scan.accelerations == {8e-5: 1.93} and scan.falls == {8e-5: 0.0, 8e-4: 0.02, 8e-3: 1.0}
+    assert scan.not_walking == {
+        8e-4: {"fell": 0.02, "velocity_error_mean": 0.05, "lin_acc_rms": 2.3},
+        8e-3: {"fell": 1.0, "velocity_error_mean": 0.6, "lin_acc_rms": None},
+    }
+    assert choose_control_weight(scan.target, scan.accelerations).k == 8e-5
+    runs[0]["metrics"]["fell"] = 0.01  # the gate's bound itself still walks
+    assert scan_of_report(report).accelerations == {8e-5: 1.93}
+    runs.pop(0)  # nothing left that walks
+    with pytest.raises(ValueError, match="walks past the warm-up"):
         scan_of_report(report)

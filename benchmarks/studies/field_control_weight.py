@@ -14,7 +14,8 @@ each of K₀, 10 K₀ and 100 K₀::
 
 Once those have trained, ``--choose REPORT`` applies the rule's second half (:func:`choose_control_weight`) to a
 ``compare`` report of the scanned control runs (margin weight 0: its "without margin" variant) against the margin
-variant's runs (its "with margin" variant, whose mean linear acceleration RMS is the target)::
+variant's runs (its "with margin" variant, whose mean linear acceleration RMS is the target), after setting apart
+every scanned K whose policy does not walk (:func:`scan_of_report`)::
 
     python -m margin_rl.train compare --runs runs/field/c_ctrl*_s0 runs/field/c_mw0.1_s{0,1,2,3,4} \\
         --env margin_rl/AnymalC-v1 --eval-episodes 64 --eval-seed 5000 --forward-velocity 0.75 --out OUT

@@ -210,10 +210,10 @@ def _mismatch_text(report: dict[str, Any], command: float) -> str:
         return "–"
     falls = [[c["variants"][name]["mean"]["fell"] for name in VARIANTS] for c in cells]
     kept = sum(with_margin <= without + FALLS_TOLERANCE + 1e-12 for without, with_margin in falls)
-    changes = sorted(c["statistics"]["lin_acc_rms"]["relative"] for c in cells)
+    changes = sorted((c["statistics"]["lin_acc_rms"]["relative"] for c in cells), key=abs)
     significant = sum((c["statistics"]["lin_acc_rms"]["p_value"] or 1.0) < 0.05 for c in cells)
-    low, high = _signed_percent(changes[-1]), _signed_percent(changes[0])
-    span = low if low == high else f"{low} to {high}"
+    weakest, strongest = _signed_percent(changes[0]), _signed_percent(changes[-1])
+    span = weakest if weakest == strongest else f"{weakest} to {strongest}"
     return f"falls within +1 pt in {kept} / {len(cells)}; lin. acc. {span} (p < 0.05 in {significant} / {len(cells)})"
 
 
@@ -236,9 +236,10 @@ def robot_table(
     cells = nominal_cells(report)
     commands = [c["forward_velocity"] for c in cells]
     episodes = int(report["settings"]["eval_episodes"])
-    seeds = report["seeds"][VARIANTS[1]]
+    without, with_margin = (report["seeds"][name] for name in VARIANTS)
+    seeds = f"{with_margin} seeds each" if without == with_margin else f"{without} → {with_margin} seeds"
     lines = [
-        "| " + " | ".join([f"without → with margin, {seeds} seeds each", *(f"{v:g} m/s" for v in commands)]) + " |",
+        "| " + " | ".join([f"without → with margin, {seeds}", *(f"{v:g} m/s" for v in commands)]) + " |",
         "|---|" + "---|" * len(commands),
         "| falls (episodes) | " + " | ".join(falls_text(c, report["seeds"], episodes) for c in cells) + " |",
     ]

@@ -444,6 +444,22 @@ def test_headline_robot_table_is_the_flat_rows_pushes_and_mismatch_by_command() 
     mismatch = cells(rows[-1])
     assert mismatch[0] == f"model mismatch ({', '.join(conditions)})"
     assert all(cell.startswith("falls within +1 pt in ") and "/ 3)" in cell for cell in mismatch[1:])
+    assert cells(header)[0] == f"without → with margin, {report['seeds']['with margin']} seeds each"
+    three_against_five = {**report, "seeds": {"without margin": 3, "with margin": 5}}  # the field study's control
+    assert cells(module.robot_table(three_against_five, push, [])[0])[0] == "without → with margin, 3 → 5 seeds"
+
+
+def test_headline_mismatch_span_runs_from_the_weakest_change_to_the_strongest() -> None:
+    module = _study("headline_table")
+
+    def cell(condition: str, relative: float) -> dict:
+        means = {name: {"mean": {"fell": 0.0}} for name in ("without margin", "with margin")}
+        stats = {"lin_acc_rms": {"relative": relative, "p_value": 0.5}}
+        return {"condition": condition, "forward_velocity": 1.0, "variants": means, "statistics": stats}
+
+    for changes, span in (((0.35, 0.16, 0.2), "+16 % to +35 %"), ((-0.12, -0.14), "−12 % to −14 %")):
+        report = {"grid": [cell(f"c{k}", change) for k, change in enumerate(changes)]}
+        assert f"lin. acc. {span} (p < 0.05 in 0 / {len(changes)})" in module._mismatch_text(report, 1.0)
 
 
 def test_headline_rough_rows_count_falls_and_their_causes_over_every_seeds_episodes() -> None:

@@ -150,7 +150,7 @@ def scan_of_report(report: Mapping[str, Any]) -> ControlScan:
 
     Raises:
         ValueError: a control run without a penalty, two runs with the same K, a run without its folder, or no
-            scanned K with an acceleration.
+            scanned K whose policy walks.
     """
     target = float(report["variants"]["with margin"]["mean"]["lin_acc_rms"])
     accelerations: dict[float, float] = {}
@@ -170,7 +170,9 @@ def scan_of_report(report: Mapping[str, Any]) -> ControlScan:
         else:
             accelerations[k] = float(metrics["lin_acc_rms"])
     if not accelerations:
-        raise ValueError(f"no scanned weight left a policy that walks past the warm-up: {sorted(not_walking)}")
+        raise ValueError(
+            f"no scanned weight left a policy that walks (falls ≤ {WALKING_FALLS:.0%}): {sorted(not_walking)}"
+        )
     return ControlScan(target, accelerations, not_walking, falls)
 
 

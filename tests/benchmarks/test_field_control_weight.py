@@ -127,5 +127,5 @@ def test_a_weight_whose_policy_does_not_walk_is_set_apart_not_chosen(tmp_path: P
     runs[0]["metrics"]["fell"] = 0.01  # the gate's bound itself still walks
     assert scan_of_report(report).accelerations == {8e-5: 1.93}
     runs.pop(0)  # nothing left that walks
-    with pytest.raises(ValueError, match="walks past the warm-up"):
+    with pytest.raises(ValueError, match="no scanned weight left a policy that walks"):
         scan_of_report(report)

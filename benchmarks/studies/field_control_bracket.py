@@ -213,18 +213,30 @@ def _push_values(
     return values
 
 
+def _margin_evaluations(control: Control) -> tuple[Any, Any]:
+    """What the margin variant measured in a control's two reports, by seed: every cell's metrics and every push
+    curve (not where its files lay: the same policies may be evaluated from their runs or from a bundle)."""
+    cells = {
+        f"{condition}@{command}": {int(r["seed"]): r["metrics"] for r in cell["variants"][MARGIN_VARIANT]["runs"]}
+        for (condition, command), cell in _cells(control.report).items()
+    }
+    pushes = {int(p["seed"]): p["curves"] for p in control.push["variants"][MARGIN_VARIANT]["policies"]}
+    return cells, pushes
+
+
 def _check_same_margin_variant(first: Control, second: Control) -> None:
-    """Both reports must hold the same margin-variant policies evaluated the same way (identical metrics)."""
-    for a, b, what in ((first.report, second.report, "compare"), (first.push, second.push, "push-recovery")):
-        if json.dumps(a["variants"][MARGIN_VARIANT], sort_keys=True, default=str) != json.dumps(
-            b["variants"][MARGIN_VARIANT], sort_keys=True, default=str
-        ):
-            raise ValueError(
-                f"the two {what} reports of {first.label} and {second.label} differ in their margin variant: evaluate "
-                "both controls against the same margin runs with the same settings"
-            )
+    """Both controls must be compared with the same margin-variant policies evaluated the same way: the same seeds
+    with identical metrics in every cell and identical push curves."""
     if set(_cells(first.report)) != set(_cells(second.report)):
         raise ValueError(f"{first.label} and {second.label} were evaluated on different grids")
+    for what, a, b in zip(
+        ("compare", "push-recovery"), _margin_evaluations(first), _margin_evaluations(second), strict=True
+    ):
+        if json.dumps(a, sort_keys=True) != json.dumps(b, sort_keys=True):
+            raise ValueError(
+                f"the two {what} reports of {first.label} and {second.label} differ in their margin variant: evaluate "
+                "both controls against the same margin policies with the same settings"
+            )
 
 
 def equal_smoothing(

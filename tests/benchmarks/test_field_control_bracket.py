@@ -165,6 +165,9 @@ def test_reports_with_different_margin_variants_are_refused() -> None:
     other.report["variants"]["with margin"]["runs"][0]["metrics"]["lin_acc_rms"] = 2.05
     with pytest.raises(ValueError, match="differ in their margin variant"):
         equal_smoothing((strong, other), [])
+    moved = _control("weak", 1e-5, [2.9, 3.0, 3.1], [0.5, 0.5, 0.5])  # the same margin policies, read elsewhere
+    moved.report["variants"]["with margin"]["runs"][0]["policy"] = "bundle/with_margin__s0/policy.pt"
+    equal_smoothing((strong, moved), [], resamples=1000)
     unbracketed = _control("weak", 1e-5, [1.7, 1.8, 1.9], [0.5, 0.5, 0.5])
     with pytest.raises(ValueError, match="do not bracket"):
         equal_smoothing((strong, unbracketed), [])

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 import margin_rl
@@ -388,6 +388,7 @@ def test_robot_files_are_package_data() -> None:
 
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.floats(-1.0, 1.0, allow_subnormal=False), min_size=4, max_size=4))
+@example([0.0, 0.5, 0.75, 0.2609569815070091])  # where a 1-D norm's dot product and an axis reduction differ
 def test_the_rotation_matrix_of_a_quaternion_is_mujocos_and_the_textbook_entries(quat: list[float]) -> None:
     """Against MuJoCo's mju_quat2Mat (to rounding) and, bit for bit, the textbook entries written out one by one
     (the numbers every earlier result was computed with)."""
@@ -397,7 +398,9 @@ def test_the_rotation_matrix_of_a_quaternion_is_mujocos_and_the_textbook_entries
     expected = np.zeros(9)
     mujoco.mju_quat2Mat(expected, q / np.linalg.norm(q))
     np.testing.assert_allclose(R, expected.reshape(3, 3), atol=1e-12)
-    w, x, y, z = q / np.linalg.norm(q)
+    # normalised as the code before the torch form did (norm over an axis: a reduction; np.linalg.norm(q) of a 1-D
+    # array is a dot product, which can differ in the last bit)
+    w, x, y, z = q / np.linalg.norm(q, axis=-1, keepdims=True)
     textbook = np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],

@@ -224,6 +224,23 @@ def _margin_evaluations(control: Control) -> tuple[Any, Any]:
     return cells, pushes
 
 
+MARGIN_NETWORK_RTOL = 1e-6
+"""Relative tolerance between two evaluations of the same policies: the learned margin's network runs in float32 and
+its last bits depend on the evaluation's batch (2e-7 relative seen between a run folder's and a bundle's evaluation of
+one policy, every other metric bit-identical)."""
+
+
+def _same_numbers(a: Any, b: Any) -> bool:
+    """Equal structure, equal strings, numbers equal to :data:`MARGIN_NETWORK_RTOL`."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same_numbers(a[k], b[k]) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_same_numbers(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
+        return math.isclose(a, b, rel_tol=MARGIN_NETWORK_RTOL, abs_tol=1e-12) or (math.isnan(a) and math.isnan(b))
+    return a == b
+
+
 def _check_same_margin_variant(first: Control, second: Control) -> None:
     """Both controls must be compared with the same margin-variant policies evaluated the same way: the same seeds
     with identical metrics in every cell and identical push curves."""
@@ -232,7 +249,7 @@ def _check_same_margin_variant(first: Control, second: Control) -> None:
     for what, a, b in zip(
         ("compare", "push-recovery"), _margin_evaluations(first), _margin_evaluations(second), strict=True
     ):
-        if json.dumps(a, sort_keys=True) != json.dumps(b, sort_keys=True):
+        if not _same_numbers(a, b):
             raise ValueError(
                 f"the two {what} reports of {first.label} and {second.label} differ in their margin variant: evaluate "
                 "both controls against the same margin policies with the same settings"

@@ -36,10 +36,10 @@ def test_the_estimate_is_the_controls_blend_at_the_margin_variants_smoothing() -
     smoother = (np.array([1.0, 1.0]), np.array([10.0, 12.0]))
     rougher = (np.array([3.0, 3.0]), np.array([20.0, 22.0]))
     margin = (np.array([2.5, 2.5, 2.5]), np.array([17.0, 18.0, 19.0]))  # w = 0.25: 0.25 × 11 + 0.75 × 21 = 18.5
-    estimate, difference, low, high, p_value, not_bracketed = equal_smoothing_difference(smoother, rougher, margin)
-    assert estimate == pytest.approx(18.5) and difference == pytest.approx(-0.5)
-    assert low < difference < high and 0 < p_value < 1
-    assert not_bracketed == 0.0  # every seed of each group has the same acceleration: w never moves
+    found = equal_smoothing_difference(smoother, rougher, margin)
+    assert found.estimate == pytest.approx(18.5) and found.difference == pytest.approx(-0.5)
+    assert found.ci_low < found.difference < found.ci_high and 0 < found.p_value < 1
+    assert found.not_bracketed == 0.0  # every seed of each group has the same acceleration: w never moves
 
 
 def test_at_one_control_the_p_value_is_welchs_between_that_control_and_the_margin_variant() -> None:
@@ -48,10 +48,10 @@ def test_at_one_control_the_p_value_is_welchs_between_that_control_and_the_margi
     smoother = (np.array([1.0, 2.0, 3.0]), np.array([0.40, 0.55, 0.47]))
     rougher = (np.array([4.0, 5.0]), np.array([9.0, 1.0]))
     margin = (np.array([1.5, 2.5, 2.0, 2.0]), np.array([0.30, 0.35, 0.41, 0.28]))
-    estimate, difference, _, _, p_value, _ = equal_smoothing_difference(smoother, rougher, margin)
-    assert estimate == pytest.approx(smoother[1].mean())
-    assert difference == pytest.approx(margin[1].mean() - smoother[1].mean())
-    assert p_value == pytest.approx(stats.ttest_ind(margin[1], smoother[1], equal_var=False).pvalue, rel=1e-9)
+    found = equal_smoothing_difference(smoother, rougher, margin)
+    assert found.estimate == pytest.approx(smoother[1].mean())
+    assert found.difference == pytest.approx(margin[1].mean() - smoother[1].mean())
+    assert found.p_value == pytest.approx(stats.ttest_ind(margin[1], smoother[1], equal_var=False).pvalue, rel=1e-9)
 
 
 @settings(max_examples=40, deadline=None)
@@ -68,10 +68,10 @@ def test_a_margin_variant_on_the_controls_line_differs_by_nothing(
     ordered = np.sort(accelerations)
     groups = [ordered[:3], ordered[6:], ordered[3:6]]  # smoother, rougher, margin: bracketed by construction
     smoother, rougher, margin = ((acc, intercept + slope * acc) for acc in groups)
-    _, difference, low, high, _, _ = equal_smoothing_difference(smoother, rougher, margin, resamples=2000)
-    assert difference == pytest.approx(0.0, abs=1e-9)
-    if low is not None:
-        assert low == pytest.approx(0.0, abs=1e-9) and high == pytest.approx(0.0, abs=1e-9)
+    found = equal_smoothing_difference(smoother, rougher, margin, resamples=2000)
+    assert found.difference == pytest.approx(0.0, abs=1e-9)
+    if found.ci_low is not None:
+        assert found.ci_low == pytest.approx(0.0, abs=1e-9) and found.ci_high == pytest.approx(0.0, abs=1e-9)
 
 
 def test_bad_groups_are_named() -> None:

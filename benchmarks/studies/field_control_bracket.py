@@ -14,8 +14,8 @@ same grid, and their ``push-recovery`` reports; the weight K of each control's p
     python benchmarks/studies/field_control_bracket.py \\
         --control "K₀" 8.0e-5 docs/comparison/field/control_c/compare.json \\
             docs/comparison/field/control_c/push_recovery.json \\
-        --control "K₀ / 10" 8.0e-6 docs/comparison/field/control_c_matched/compare.json \\
-            docs/comparison/field/control_c_matched/push_recovery.json \\
+        --control "K₀ / 10" 8.0e-6 docs/comparison/field/control_c_k0_10/compare.json \\
+            docs/comparison/field/control_c_k0_10/push_recovery.json \\
         [--pushes lateral:30 lateral:45 ...] [--json OUT]
 
 Method. At the primary cell (nominal, the reports' main command, 0.75 m/s in the study), with A_s and A_r the

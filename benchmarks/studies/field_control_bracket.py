@@ -244,9 +244,9 @@ def _margin_evaluations(control: Control) -> tuple[Any, Any]:
 
 
 MARGIN_NETWORK_RTOL = 1e-6
-"""Relative tolerance between two evaluations of the same policies: the learned margin's network runs in float32 and
-its last bits depend on the evaluation's batch (2e-7 relative seen between a run folder's and a bundle's evaluation of
-one policy, every other metric bit-identical)."""
+"""Relative tolerance between two evaluations of the same policies: the learned margin's network runs in float32, and
+a run folder's and a bundle's evaluation of one policy were seen to differ by up to 2e-7 relative in the margin's
+metrics, every other metric bit-identical."""
 
 
 def _same_numbers(a: Any, b: Any) -> bool:
@@ -262,7 +262,7 @@ def _same_numbers(a: Any, b: Any) -> bool:
 
 def _check_same_margin_variant(first: Control, second: Control) -> None:
     """Both controls must be compared with the same margin-variant policies evaluated the same way: the same seeds
-    with identical metrics in every cell and identical push curves."""
+    with the same metrics in every cell and the same push curves (numbers to :data:`MARGIN_NETWORK_RTOL`)."""
     if set(_cells(first.report)) != set(_cells(second.report)):
         raise ValueError(f"{first.label} and {second.label} were evaluated on different grids")
     for what, a, b in zip(

@@ -57,6 +57,7 @@ from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository root: benchmarks
 
+from benchmarks.studies.headline_table import evaluation_cells, policy_survivals
 from margin_rl.train.analysis.conditions import DEFAULT_CONDITION
 
 MARGIN_VARIANT = "with margin"
@@ -206,8 +207,7 @@ def equal_smoothing_difference(
 
 def _cells(report: dict[str, Any]) -> dict[tuple[str, float], dict[str, Any]]:
     """Every evaluation cell of a compare report, the main one included, by (condition, command)."""
-    main = {"condition": DEFAULT_CONDITION, "forward_velocity": report["settings"]["forward_velocity"], **report}
-    return {(c["condition"], round(float(c["forward_velocity"]), 6)): c for c in [main, *report.get("grid", [])]}
+    return {(c["condition"], round(float(c["forward_velocity"]), 6)): c for c in evaluation_cells(report)}
 
 
 def _mean(values: dict[int, float]) -> float:
@@ -221,15 +221,7 @@ def _episode_values(cell: dict[str, Any], variant: str, metric: str) -> dict[int
 def _push_values(
     push: dict[str, Any], variant: str, direction: str, command: float, impulse: float
 ) -> dict[int, float]:
-    values = {}
-    for policy in push["variants"][variant]["policies"]:
-        curve = [
-            c for c in policy["curves"] if c["direction"] == direction and abs(c["forward_velocity"] - command) < 1e-9
-        ]
-        if not curve or impulse not in curve[0]["impulses"]:
-            raise ValueError(f"push-recovery report has no {direction} push of {impulse:g} N s at {command:g} m/s")
-        values[int(policy["seed"])] = float(curve[0]["survival"][curve[0]["impulses"].index(impulse)])
-    return values
+    return {int(seed): survival for seed, survival in policy_survivals(push, variant, direction, command, impulse)}
 
 
 def _margin_evaluations(control: Control) -> tuple[Any, Any]:

@@ -68,10 +68,16 @@ def as_report(data: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def evaluation_cells(report: dict[str, Any]) -> list[dict[str, Any]]:
+    """Every evaluation cell of a report: the main cell first (the nominal condition at the report's command, whose
+    variants and statistics are the report's own, not in its grid), then the grid's cells."""
+    main = {"condition": DEFAULT_CONDITION, "forward_velocity": report["settings"]["forward_velocity"], **report}
+    return [main, *report.get("grid", [])]
+
+
 def nominal_cells(report: dict[str, Any]) -> list[dict[str, Any]]:
     """The nominal-condition cells of a report (the main cell among them), commands ascending."""
-    main = {"condition": DEFAULT_CONDITION, "forward_velocity": report["settings"]["forward_velocity"], **report}
-    cells = [main, *(c for c in report["grid"] if c["condition"] == DEFAULT_CONDITION)]
+    cells = [c for c in evaluation_cells(report) if c["condition"] == DEFAULT_CONDITION]
     return sorted(cells, key=lambda c: c["forward_velocity"])
 
 
@@ -180,18 +186,30 @@ def _change_text(a: float, b: float, fmt: str, stats: dict[str, Any], relative: 
     return f"{a:{fmt}} → {b:{fmt}} ({change}{_p_text(stats['p_value'])})"
 
 
+def policy_survivals(
+    push: dict[str, Any], variant: str, direction: str, command: float, impulse: float
+) -> list[tuple[Any, float]]:
+    """(training seed, survival) of each policy of ``variant`` in a push-recovery report, pushed ``direction`` with
+    ``impulse`` [N s] at ``command`` [m/s], in the report's policy order.
+
+    Raises:
+        ValueError: a policy without that push.
+    """
+    found = []
+    for policy in push["variants"][variant]["policies"]:
+        curve = [
+            c for c in policy["curves"] if c["direction"] == direction and abs(c["forward_velocity"] - command) < 1e-9
+        ]
+        if not curve or impulse not in curve[0]["impulses"]:
+            raise ValueError(f"push-recovery report has no {direction} push of {impulse:g} N s at {command:g} m/s")
+        found.append((policy["seed"], float(curve[0]["survival"][curve[0]["impulses"].index(impulse)])))
+    return found
+
+
 def _push_survival(push: dict[str, Any], direction: str, command: float, impulse: float) -> str:
-    per_seed = []
-    for name in VARIANTS:
-        values = []
-        for policy in push["variants"][name]["policies"]:
-            curve = next(
-                c
-                for c in policy["curves"]
-                if c["direction"] == direction and abs(c["forward_velocity"] - command) < 1e-9
-            )
-            values.append(curve["survival"][curve["impulses"].index(impulse)])
-        per_seed.append(values)
+    per_seed = [
+        [survival for _, survival in policy_survivals(push, name, direction, command, impulse)] for name in VARIANTS
+    ]
     test = compare_seeds(f"survival at {impulse:g} N s", per_seed[0], per_seed[1], names=VARIANTS)
     return f"{test.mean_a:.2f} → {test.mean_b:.2f} ({_p_text(test.p_value)})"
 

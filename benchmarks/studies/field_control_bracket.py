@@ -221,7 +221,10 @@ def _episode_values(cell: dict[str, Any], variant: str, metric: str) -> dict[int
 def _push_values(
     push: dict[str, Any], variant: str, direction: str, command: float, impulse: float
 ) -> dict[int, float]:
-    return {int(seed): survival for seed, survival in policy_survivals(push, variant, direction, command, impulse)}
+    found = policy_survivals(push, variant, direction, command, impulse)
+    if any(seed is None for seed, _ in found):
+        raise ValueError(f"{variant}: a push-recovery policy without its training seed; the seeds pair it with compare")
+    return {int(seed): survival for seed, survival in found}
 
 
 def _margin_evaluations(control: Control) -> tuple[Any, Any]:

@@ -189,8 +189,8 @@ def _change_text(a: float, b: float, fmt: str, stats: dict[str, Any], relative: 
 def policy_survivals(
     push: dict[str, Any], variant: str, direction: str, command: float, impulse: float
 ) -> list[tuple[Any, float]]:
-    """(training seed, survival) of each policy of ``variant`` in a push-recovery report, pushed ``direction`` with
-    ``impulse`` [N s] at ``command`` [m/s], in the report's policy order.
+    """(training seed or None, survival) of each policy of ``variant`` in a push-recovery report, pushed
+    ``direction`` with ``impulse`` [N s] at ``command`` [m/s], in the report's policy order.
 
     Raises:
         ValueError: a policy without that push.
@@ -202,7 +202,7 @@ def policy_survivals(
         ]
         if not curve or impulse not in curve[0]["impulses"]:
             raise ValueError(f"push-recovery report has no {direction} push of {impulse:g} N s at {command:g} m/s")
-        found.append((policy["seed"], float(curve[0]["survival"][curve[0]["impulses"].index(impulse)])))
+        found.append((policy.get("seed"), float(curve[0]["survival"][curve[0]["impulses"].index(impulse)])))
     return found
 
 

@@ -44,10 +44,10 @@ import mujoco
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import Array, finite_mask, like, namespace, random_generator, rotate
+from margin_rl.arrays import Array, finite_mask, like, namespace, random_generator, rotate, write_where
 from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, make_physics
 from margin_rl.envs.config import EnvConfig
-from margin_rl.envs.episode_state import EPISODE_COUNTERS, EPISODE_STATE, episode_views
+from margin_rl.envs.episode_state import EPISODE_COUNTERS, EPISODE_STATE, episode_columns, episode_views
 from margin_rl.envs.ground import GroundQueries
 from margin_rl.envs.margin_kinds import check_margin_runs_on, make_margin_function
 from margin_rl.envs.observations import (
@@ -61,6 +61,7 @@ from margin_rl.envs.observations import (
 from margin_rl.envs.physics import PhysicsBackend
 from margin_rl.envs.pushes import checked_push, push_steps, start_random_pushes
 from margin_rl.envs.reset_rows import ResetRows
+from margin_rl.envs.reset_state import StandingStart, draw_reset
 from margin_rl.envs.rewards import compute_rewards
 from margin_rl.envs.scene import build_model
 from margin_rl.envs.stability_input import (
@@ -208,12 +209,17 @@ class AnymalCore:
         self._reader = StateReader(physics, self.robot)
         self._key, key_qpos, key_ctrl = physics.keyframe(names.STANDING_KEYFRAME)
         self._key_qpos, self._key_ctrl = self._array(key_qpos), self._array(key_ctrl)
+        self._standing_start = StandingStart.of(self._key_qpos, physics.nv)  # what a reset starts from
         self._key_ctrl_physics = self._cast(self._key_ctrl, physics.ctrl)  # in the physics' own dtype, once
         self._standing_joint_pos = self._array(self.robot.standing_joint_pos)
         # |tau| within this share of the MJCF forcerange counts as at the limit (MuJoCo clips to it exactly; Warp's
         # float32 rounds within ~1e-7 of it)
         self._torque_at_limit = self._array((1.0 - TORQUE_LIMIT_TOLERANCE) * self.robot.torque_limits)
         self._floor = physics.geom_id(names.FLOOR_GEOM)
+        # a valid state: every qpos finite (at most the largest float), every qvel at most DIVERGED_SPEED, in the
+        # physics' dtype, so that one comparison of the joined state checks both (_invalid_state)
+        nq, nv, largest = physics.qpos.shape[1], physics.qvel.shape[1], self.xp.finfo(physics.qpos.dtype).max
+        self._valid_state_bound = self._cast(self._array([largest] * nq + [DIVERGED_SPEED] * nv), physics.qpos)
         self._friction = physics.per_env_field("geom_friction")
         self._allocate_state()
         self._margin_fn = make_margin_function(config.margin, self.robot, config.margin_weights, MARGIN_CLIP[0])
@@ -331,48 +337,38 @@ class AnymalCore:
         if self.terrain.levels:
             self._move_between_levels(rows)
         physics.reset(rows.physics_rows, self._key)
-        qpos = xp.asarray(xp.broadcast_to(self._key_qpos, (n, self._key_qpos.shape[0])), copy=True)
-        spawn_points = self.terrain.spawn_points_like(qpos)
+        spawn_points = self.terrain.spawn_points_like(self._key_qpos)
         if self.terrain.levels:  # a tile of the environment's level, at random along its row
             columns = spawn_points.shape[0] // self.terrain.levels
             tile = self.terrain_level[rows.select] * columns + self._index(rng.integers(0, columns, size=n))
             spawn = spawn_points[tile]
         else:
             spawn = spawn_points[rng.integers(0, spawn_points.shape[0], size=n)]
-        base_pos = qpos[:, names.BASE_POSITION_QPOS]  # a view: writes go to qpos
-        base_pos[:, :2] = spawn[:, :2]
-        base_pos[:, 2] = spawn[:, 2] + self._key_qpos[names.BASE_POSITION_QPOS][2] + 0.02  # 2 cm above the ground
-        qpos[:, names.JOINT_QPOS] += rng.uniform(-1, 1, size=(n, 12)) * rnd.reset_joint_noise
-        qvel = xp.zeros((n, physics.nv), dtype=xp.float64, device=self.device)
-        qvel[:, names.BASE_QVEL] = rng.uniform(-1, 1, size=(n, 6)) * rnd.reset_velocity_noise
+        draws = draw_reset(rng, n, cfg)
+        qpos, qvel = self._standing_start.state(spawn, draws, cfg)
         rows.write(physics.qpos, self._cast(qpos, physics.qpos))
         rows.write(physics.qvel, self._cast(qvel, physics.qvel))
         rows.write(physics.ctrl, self._key_ctrl_physics)
         rows.write(physics.xfrc_applied, 0.0)
         mu = self.mu[rows.select]
-        if rnd.friction is not None:
-            mu = rng.uniform(*rnd.friction, size=n)
+        if draws.friction is not None:
+            mu = draws.friction
             rows.write(self._friction[:, self._floor, 0], self._cast(mu, self._friction))
         physics.forward(rows.forward_rows)
-        c = cfg.command
-        velocities = (c.forward_velocity, c.lateral_velocity, c.yaw_rate)
-        command = xp.stack([rng.uniform(*bounds, n) for bounds in velocities], axis=1)
         state = self._read(rows.select)
         next_push = self._next_push[rows.select]
         if rnd.push_interval_s is not None:
             next_push = rng.exponential(rnd.push_interval_s / self.dt, size=n)
         start = {  # the episode's first values, in EPISODE_STATE's columns (the rest 0)
-            "_spawn_xy": spawn[:, :2],
-            "command": command,
+            "_spawn_xy": qpos[:, :2],
+            "command": draws.command,
             "_prev_com_vel": state.com_vel,
             "_prev_ang_vel": state.ang_vel_world,
             "_prev_joint_vel": state.joint_vel,
             "_next_push": next_push[:, None],
             "mu": mu[:, None],
         }
-        zeros = xp.zeros((n, max(EPISODE_STATE.values())), dtype=xp.float64, device=self.device)
-        columns = [start.get(name, zeros[:, :width]) for name, width in EPISODE_STATE.items()]
-        rows.write(self._episode_floats, xp.concat(columns, axis=1))
+        rows.write(self._episode_floats, xp.concat(episode_columns(start, n, xp, self.device), axis=1))
         rows.write(self._episode_counters, 0)  # episode_step, push steps left
         rows.write(self._prev_contacts, True)
         return state
@@ -514,9 +510,10 @@ class AnymalCore:
 
     def _invalid_state(self) -> Any:
         """(N,) True where qpos or qvel is non-finite or a velocity exceeds :data:`DIVERGED_SPEED`."""
-        xp, qpos, qvel = self.xp, self.physics.qpos, self.physics.qvel
-        # |qvel| <= a bound is false for NaN and inf as well: one comparison covers two conditions
-        return ~(xp.all(xp.abs(qvel) <= DIVERGED_SPEED, axis=1) & xp.all(finite_mask(qpos), axis=1))
+        xp = self.xp
+        state = xp.concat((self.physics.qpos, self.physics.qvel), axis=1)
+        # |x| <= a bound is false for NaN and inf as well: one comparison covers finiteness and the speed limit
+        return ~xp.all(xp.abs(state) <= self._valid_state_bound, axis=1)
 
     def _simulate(self) -> Array:
         """Step the physics ``decimation`` times; returns the (N,) divergence flags.
@@ -597,7 +594,7 @@ class AnymalCore:
         touchdown = contacts & ~self._prev_contacts
         self._air_time += self.dt
         air_at_touchdown = xp.where(touchdown, self._air_time, 0.0)
-        self._air_time[...] = xp.where(contacts, 0.0, self._air_time)
+        write_where(self._air_time, contacts, 0.0)
         self._prev_contacts[...] = contacts
         return touchdown, air_at_touchdown
 

@@ -7,19 +7,20 @@ from __future__ import annotations
 from typing import Any
 
 EPISODE_STATE: dict[str, int] = {
+    # what a reset draws or reads, then what it sets to 0: the zeros in one block (one piece of the reset's write)
     "_spawn_xy": 2,  # where the episode started [m], for the curriculum's distance walked
     "command": 3,  # (v_x [m/s], v_y [m/s], yaw rate [rad/s]), base heading frame
-    "last_action": 12,
     "_prev_com_vel": 3,  # the last step's velocities, for the finite-difference accelerations
     "_prev_ang_vel": 3,
     "_prev_joint_vel": 12,
+    "_next_push": 1,  # policy steps until the next random push
+    "mu": 1,  # the floor's friction coefficient
+    "last_action": 12,
     "_com_acc": 3,  # the filtered accelerations [m/s^2], [rad/s^2]
     "_ang_acc": 3,
     "_air_time": 4,  # [s] per foot
     "_push_force": 3,  # the running push [N], and the force of this step (lambda's f_ext)
     "_push_applied": 3,
-    "_next_push": 1,  # policy steps until the next random push
-    "mu": 1,  # the floor's friction coefficient
 }
 """The float state of an environment's episode, in the order of its columns (widths)."""
 
@@ -36,3 +37,21 @@ def episode_views(floats: Any, counters: Any) -> dict[str, Any]:
         views[name] = view if width > 1 else view[:, 0]
         start += width
     return views | {name: counters[:, k] for k, name in enumerate(EPISODE_COUNTERS)}
+
+
+def episode_columns(start: dict[str, Any], n: int, xp: Any, device: Any) -> list[Any]:
+    """The pieces of ``n`` rows of the float episode state, in :data:`EPISODE_STATE`'s order, to concatenate: the
+    arrays of ``start`` (name -> (n, width)), and zeros for the other columns, one array per run of them."""
+    pieces: list[Any] = []
+    zero_run = 0
+    for name, width in EPISODE_STATE.items():
+        if name not in start:
+            zero_run += width
+            continue
+        if zero_run:
+            pieces.append(xp.zeros((n, zero_run), dtype=xp.float64, device=device))
+            zero_run = 0
+        pieces.append(start[name])
+    if zero_run:
+        pieces.append(xp.zeros((n, zero_run), dtype=xp.float64, device=device))
+    return pieces

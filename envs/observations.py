@@ -103,7 +103,9 @@ def assemble(values: dict[str, Any], terms: tuple[ObservationTerm, ...], noise_l
     xp = namespace(*values.values())
     parts = []
     for t in terms:
-        v = xp.reshape(xp.astype(xp.asarray(values[t.name]), xp.float64, copy=False), (-1, t.size))
+        v = xp.astype(xp.asarray(values[t.name]), xp.float64, copy=False)
+        if tuple(v.shape[1:]) != (t.size,):  # (N, ...) flattened per environment; (N, size) already is
+            v = xp.reshape(v, (-1, t.size))
         if noise_level > 0 and t.noise > 0:
             v = v + rng.uniform(-1.0, 1.0, size=v.shape) * t.noise * noise_level
         parts.append(v)

@@ -58,7 +58,7 @@ except ImportError as exc:  # the optional dependency of the GPU path
         "and warp-lang, pinned together with mujoco), or use physics='mujoco'"
     ) from exc
 
-from margin_rl.arrays import to_numpy
+from margin_rl.arrays import to_numpy, write_where
 from margin_rl.envs.physics import ModelConstants, render_data, restore_per_env_fields
 
 # No start-up banner and no line per kernel module loaded or compiled (hundreds for ANYmal); warnings stay.
@@ -198,6 +198,7 @@ class WarpPhysics(ModelConstants):
         self._overflow = view(data.overflow)
         self._overflow_seen = torch.zeros_like(self._overflow)  # on the device, kept across resets (which clear it)
         self._reset_mask = view(self._reset_worlds)
+        self._reset_rows = self._reset_mask[:, None]  # the mask over a row of qpos, qvel, ctrl (a view, made once)
         self._keyframes: dict[int, tuple[torch.Tensor, torch.Tensor, torch.Tensor]] = {}
         self._per_env_fields = {name: view(getattr(self._model, name)) for name in PER_ENV_FIELDS}
 
@@ -261,10 +262,9 @@ class WarpPhysics(ModelConstants):
             mask.fill_(False)
             mask[torch.as_tensor(ids, dtype=torch.int64, device=mask.device)] = True
         self._replay("reset", lambda: mjw.reset_data(self._model, self._data, self._reset_worlds))
-        rows = mask[:, None]
         for live, value in zip((self.qpos, self.qvel, self.ctrl), self._keyframe_state(keyframe), strict=True):
-            live[...] = torch.where(rows, value, live)
-        self.time[...] = torch.where(mask, float(self.model.key(keyframe).time[0]), self.time)
+            write_where(live, self._reset_rows, value)
+        write_where(self.time, mask, float(self.model.key(keyframe).time[0]))
 
     def _keyframe_state(self, keyframe: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """The keyframe's qpos, qvel and ctrl as tensors on the device, made once (not copied from the host at every

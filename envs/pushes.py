@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from margin_rl.arrays import namespace, to_numpy
+from margin_rl.arrays import namespace, to_numpy, write_where
 from margin_rl.envs.config import RandomizationConfig
 
 PUSH_FRAMES = ("world", "heading")
@@ -65,9 +65,9 @@ def start_random_pushes(
     if by_mask:
         angle = rng.uniform(0, 2 * np.pi, size=n)
         pushed, wait = directions(angle), rng.exponential(mean_wait, size=n)
-        force[...] = xp.where(start[:, None], pushed, force)
-        steps_left[...] = xp.where(start, steps, steps_left)
-        next_push[...] = xp.where(start, wait, next_push)
+        write_where(force, start, pushed)
+        write_where(steps_left, start, steps)
+        write_where(next_push, start, wait)
         return
     count = int(xp.sum(start))
     if count:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from margin_rl.arrays import namespace
+from margin_rl.arrays import write_where
 
 
 @dataclass(frozen=True)
@@ -17,6 +17,7 @@ class ResetRows:
     select: Any  # what reads the rows: the ids, or slice(None)
     count: int  # rows computed (and random draws per quantity)
     mask: Any = None  # (N,) bool where written; None: the ids
+    mask_rows: Any = None  # the mask as (N, 1), over the rows of a 2-D array (a view, made once per reset)
 
     @classmethod
     def at(cls, ids: Any) -> ResetRows:
@@ -24,7 +25,7 @@ class ResetRows:
 
     @classmethod
     def where(cls, mask: Any) -> ResetRows:
-        return cls(slice(None), int(mask.shape[0]), mask)
+        return cls(slice(None), int(mask.shape[0]), mask, mask[:, None])
 
     @property
     def physics_rows(self) -> Any:
@@ -41,6 +42,4 @@ class ResetRows:
         if self.mask is None:
             target[self.select] = values
             return
-        xp = namespace(target)
-        mask = xp.reshape(self.mask, (self.count,) + (1,) * (target.ndim - 1))
-        target[...] = xp.where(mask, values, target)
+        write_where(target, self.mask if target.ndim == 1 else self.mask_rows, values)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from margin_rl.arrays import namespace, rotate
+from margin_rl.arrays import namespace, rotate, unstack
 from margin_rl.stability.analytic.lambda_state import StabilityState
 
 
@@ -24,11 +24,12 @@ def heading_rotation(base_rotation: Any) -> Any:
     """Rotation R_WH (..., 3, 3) of the horizontal frame H in the world: the yaw of the base x axis (numpy arrays or
     torch tensors, :mod:`margin_rl.arrays`)."""
     xp = namespace(base_rotation)
-    yaw = xp.atan2(base_rotation[..., 1, 0], base_rotation[..., 0, 0])
+    x_axis = base_rotation[..., 0]  # the base x axis in W (R_WB's first column)
+    yaw = xp.atan2(x_axis[..., 1], x_axis[..., 0])
     c, s = xp.cos(yaw), xp.sin(yaw)
     zero, one = xp.zeros_like(c), xp.ones_like(c)
-    rows = [xp.stack([c, -s, zero], axis=-1), xp.stack([s, c, zero], axis=-1), xp.stack([zero, zero, one], axis=-1)]
-    return xp.stack(rows, axis=-2)
+    entries = xp.stack([c, -s, zero, s, c, zero, zero, zero, one], axis=-1)  # row by row
+    return xp.reshape(entries, (*entries.shape[:-1], 3, 3))
 
 
 def stability_state_from_simulation(
@@ -55,13 +56,14 @@ def stability_state_from_simulation(
     single = xp.stack([com_vel, com_acc, base_ang_acc, ext_force, ext_torque], axis=1)  # (N, 5, 3)
     vectors = xp.concat([single, feet - com[:, None, :], normals], axis=1)  # (N, 5 + 4 + 4, 3), world frame
     in_h = rotate(heading_rotation(base_rotation), vectors, inverse=True)
+    com_vel_h, com_acc_h, base_ang_acc_h, ext_force_h, ext_torque_h = unstack(in_h)[:5]
     return StabilityState(
         gravity_axis=base_rotation[:, 2, :],
-        com_vel=in_h[:, 0],
-        com_acc=in_h[:, 1],
-        base_ang_acc=in_h[:, 2],
-        ext_force=in_h[:, 3],
-        ext_torque=in_h[:, 4],
+        com_vel=com_vel_h,
+        com_acc=com_acc_h,
+        base_ang_acc=base_ang_acc_h,
+        ext_force=ext_force_h,
+        ext_torque=ext_torque_h,
         feet=in_h[:, 5:9],
         mu=xp.astype(xp.asarray(mu), xp.float64, copy=False),
         contacts=xp.astype(xp.asarray(contacts), xp.float64),
@@ -80,4 +82,6 @@ def stance_width(feet_h: Any) -> Any:
     ``feet_h`` (N, 4, 3): feet in H (LF, RF, LH, RH), e.g. :attr:`StabilityState.feet`.
     """
     xp = namespace(feet_h)
-    return 0.5 * (xp.abs(feet_h[:, 0, 1] - feet_h[:, 1, 1]) + xp.abs(feet_h[:, 2, 1] - feet_h[:, 3, 1]))
+    lateral = feet_h[:, :, 1]
+    left_minus_right = lateral[:, 0::2] - lateral[:, 1::2]  # (N, 2): the front pair, the hind pair
+    return 0.5 * xp.sum(xp.abs(left_minus_right), axis=1)

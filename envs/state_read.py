@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from margin_rl.arrays import finite_mask, like, namespace, rotate
+from margin_rl.arrays import finite_or_zero, like, namespace, rotate, split_columns
 from margin_rl.envs.physics import PhysicsBackend
 from margin_rl.envs.step_data import SimulationState
 from margin_rl.robot import Robot, quat_wxyz_to_matrix
@@ -50,6 +50,21 @@ class StateReader:
         self._com_vel = _shifted(physics.sensor_slice(names.COM_VELOCITY_SENSOR), sensors, nsensor)
         self._feet_columns = slice(sensors + nsensor, sensors + nsensor + 12)
         self._knee_columns = slice(sensors + nsensor + 12, sensors + nsensor + 24)
+        self._fields, self._widths = _field_split(
+            {
+                "base_pos": self._base_pos,
+                "quat": self._quat,
+                "joint_pos": self._joint_pos,
+                "lin_vel_world": self._lin_vel,
+                "ang_vel_body": self._ang_vel,
+                "joint_vel": self._joint_vel,
+                "com": self._com,
+                "com_vel": self._com_vel,
+                "feet": self._feet_columns,
+                "knees": self._knee_columns,
+            },
+            self._knee_columns.stop,
+        )
         # First entry ("found") of each contact sensor: the feet, the thighs, the base, compared in one gather.
         found = [physics.sensor_adr(names.foot_contact_sensor(leg)) for leg in legs]
         found += [physics.sensor_adr(names.thigh_contact_sensor(leg)) for leg in legs]
@@ -79,26 +94,52 @@ class StateReader:
             xp.reshape(knees, (n, 12)),
         )
         block = xp.astype(xp.concat(sources, axis=1), xp.float64, copy=False)
-        R = quat_wxyz_to_matrix(block[:, self._quat])
-        ang_vel_body = block[:, self._ang_vel]
-        ang_vel_world = rotate(R, ang_vel_body)
+        values = finite_or_zero(block) if finite else block
+        field = dict(zip(self._fields, split_columns(values, self._widths), strict=True))
+        # the derived fields from the raw values, then made finite like the others
+        R = quat_wxyz_to_matrix(block[:, self._quat] if finite else field["quat"])
+        ang_vel_world = rotate(R, block[:, self._ang_vel] if finite else field["ang_vel_body"])
         if finite:
-            block, R, ang_vel_world = (xp.where(finite_mask(a), a, 0.0) for a in (block, R, ang_vel_world))
-            ang_vel_body = block[:, self._ang_vel]
-        touching = block[:, self._contact_columns] > 0
+            R, ang_vel_world = finite_or_zero(R), finite_or_zero(ang_vel_world)
+        feet_touching, thighs_touching, base_touching = split_columns(values[:, self._contact_columns] > 0, (4, 4, 1))
         return SimulationState(
-            base_pos=block[:, self._base_pos],
+            base_pos=field["base_pos"],
             base_rot=R,
-            lin_vel_world=block[:, self._lin_vel],
-            ang_vel_body=ang_vel_body,
+            lin_vel_world=field["lin_vel_world"],
+            ang_vel_body=field["ang_vel_body"],
             ang_vel_world=ang_vel_world,
-            joint_pos=block[:, self._joint_pos],
-            joint_vel=block[:, self._joint_vel],
-            com=block[:, self._com],
-            com_vel=block[:, self._com_vel],
-            feet=xp.reshape(block[:, self._feet_columns], (n, 4, 3)),
-            contacts=touching[:, :4],
-            base_contact=touching[:, 8],
-            thigh_contacts=touching[:, 4:8],
-            knees=xp.reshape(block[:, self._knee_columns], (n, 4, 3)),
+            joint_pos=field["joint_pos"],
+            joint_vel=field["joint_vel"],
+            com=field["com"],
+            com_vel=field["com_vel"],
+            feet=xp.reshape(field["feet"], (n, 4, 3)),
+            contacts=feet_touching,
+            base_contact=base_touching[:, 0],
+            thigh_contacts=thighs_touching,
+            knees=xp.reshape(field["knees"], (n, 4, 3)),
         )
+
+
+def _field_split(fields: dict[str, slice], width: int) -> tuple[tuple[str | None, ...], tuple[int, ...]]:
+    """The names and widths of the consecutive pieces of a block of ``width`` columns that hold ``fields`` (name ->
+    its columns), the columns between them as unnamed pieces (None), for :func:`~margin_rl.arrays.split_columns`.
+
+    Raises:
+        ValueError: two fields share columns (the model's layout is not the one this reader was written for).
+    """
+    names: list[str | None] = []
+    widths: list[int] = []
+    at = 0
+    for name, columns in sorted(fields.items(), key=lambda item: item[1].start):
+        if columns.start < at:
+            raise ValueError(f"the state field {name!r} (columns {columns.start}:{columns.stop}) overlaps another")
+        if columns.start > at:
+            names.append(None)
+            widths.append(columns.start - at)
+        names.append(name)
+        widths.append(columns.stop - columns.start)
+        at = columns.stop
+    if width > at:
+        names.append(None)
+        widths.append(width - at)
+    return tuple(names), tuple(widths)

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from margin_rl.arrays import finite_mask, namespace, to_numpy
+from margin_rl.arrays import finite_mask, namespace, to_numpy, write_where
 
 CHECKS: dict[str, type[Exception]] = {
     "action": ValueError,
@@ -58,7 +58,7 @@ class StepChecks:
         now = xp.stack([failed[check] for check in CHECKS], axis=1)
         self._failed |= now
         first = xp.any(now, axis=1) & (self._first_step == NO_STEP)
-        self._first_step[...] = xp.where(first, self._steps, self._first_step)
+        write_where(self._first_step, first, self._steps)
         self._steps += 1
 
     def record_step(self, action_failed: Any, reward: Any, observations: Any) -> None:

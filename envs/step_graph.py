@@ -1,6 +1,6 @@
 """A core's step recorded once and replayed: on a CUDA device, one policy step (the actions copied in, the torch
 stages, MuJoCo Warp's launches for the decimated physics, the masked reset and the forward pass) becomes one CUDA
-graph, so the ~550 operations the step dispatches from Python (docs/studies/simulation_speed.md) cost one launch.
+graph, so the ~400 operations the step dispatches from Python (docs/studies/simulation_speed.md) cost one launch.
 
 What makes the step recordable is the core's, checked on Warp's CPU device: it reads nothing from the host, draws a
 fixed count of random numbers, keeps its state at fixed addresses and bakes no step-varying number of the host's

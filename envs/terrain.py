@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import constant, like, namespace, to_numpy
+from margin_rl.arrays import constant, like, namespace, to_numpy, unstack
 
 TILE_TYPES: tuple[str, ...] = (
     "flat",
@@ -146,10 +146,11 @@ class Terrain:
         uv = xp.clip((xy - constant(np.array(self.origin), xy)) / self.resolution, first, last)
         cell = xp.astype(xp.floor(uv), xp.int64)
         fraction = uv - cell
-        fu, fv = fraction[..., 0], fraction[..., 1]
-        corner = cell[..., 1] * columns + cell[..., 0]
+        fu, fv = unstack(fraction, axis=-1)
+        cell_column, cell_row = unstack(cell, axis=-1)
+        corner = cell_row * columns + cell_column
         corners = xp.reshape(h, (-1,))[corner[..., None] + constant(np.array([0, 1, columns, columns + 1]), corner)]
-        h00, h01, h10, h11 = (corners[..., k] for k in range(4))
+        h00, h01, h10, h11 = unstack(corners, axis=-1)
         # Triangle (00, 01, 11) where fu >= fv, triangle (00, 10, 11) elsewhere.
         return xp.where(fu >= fv, h00 + fu * (h01 - h00) + fv * (h11 - h01), h00 + fv * (h10 - h00) + fu * (h11 - h10))
 

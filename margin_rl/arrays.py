@@ -60,6 +60,59 @@ def finite_mask(values: Any) -> Any:
     return xp.abs(values) <= xp.finfo(values.dtype).max
 
 
+def finite_or_zero(values: Any) -> Any:
+    """``values`` with every NaN and inf replaced by 0 (a new array): ``where(finite_mask(x), x, 0)`` in one
+    operation (``nan_to_num``, numpy's and torch's alike)."""
+    xp = namespace(values)
+    return xp.nan_to_num(values, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def split_columns(block: Any, widths: Any) -> tuple[Any, ...]:
+    """Views of consecutive column ranges of ``block`` (N, sum(widths)), of ``widths`` columns each, in one
+    operation on torch (``split``; numpy: the slices): a block read once and named by parts, without a slice
+    dispatched per part."""
+    widths = [int(w) for w in widths]
+    if sum(widths) != int(block.shape[1]):
+        raise ValueError(f"column widths {widths} sum to {sum(widths)}, but the block has {block.shape[1]} columns")
+    if namespace(block) is np:  # slices (numpy's split is the same views, made in Python at more cost)
+        stops = np.cumsum(widths).tolist()
+        return tuple(block[:, stop - width : stop] for width, stop in zip(widths, stops, strict=True))
+    return tuple(block.split(widths, dim=1))
+
+
+def unstack(values: Any, axis: int = 1) -> tuple[Any, ...]:
+    """The slices of ``values`` along ``axis`` (views; by default the columns ``values[:, k]``): the standard's
+    ``unstack`` in one operation on torch (``unbind``; ``array_api_compat``'s dispatches a ``permute`` first),
+    numpy's own."""
+    if namespace(values) is np:
+        return np.unstack(values, axis=axis)
+    return values.unbind(axis)
+
+
+def take_last(values: Any, index: Any) -> Any:
+    """``values[..., index]`` for an integer ``index`` (k,) of ``values``' kind, as a new C-ordered array: numpy's
+    ``take``, torch's ``index_select`` (one operation; the standard's ``take`` dispatches four on torch)."""
+    if namespace(values) is np:
+        return np.take(values, index, axis=-1)
+    return values.index_select(-1, index)
+
+
+def write_where(target: Any, mask: Any, values: Any) -> None:
+    """``target = where(mask, values, target)`` in place: ``mask`` (N,) bool selects rows of ``target`` (N, ...)
+    (or is shaped to broadcast over them already, e.g. (N, 1)); ``values``, broadcast to ``target``, is a scalar or
+    an array. One operation on torch (``masked_fill_`` for a scalar, ``where`` into ``target`` for an array),
+    ``copyto`` on numpy; no host read, the same work whichever rows the mask holds."""
+    rows = mask if mask.ndim == target.ndim else mask.reshape(mask.shape + (1,) * (target.ndim - mask.ndim))
+    if namespace(target) is np:
+        np.copyto(target, values, where=rows)
+    elif isinstance(values, (int, float, bool, np.generic)):
+        target.masked_fill_(rows, values.item() if isinstance(values, np.generic) else values)
+    else:
+        import torch  # tensors: torch is loaded already
+
+        torch.where(rows, values, target, out=target)
+
+
 def rotate(rotations: Any, vectors: Any, inverse: bool = False) -> Any:
     """Vectors turned by a batch of rotation matrices: R_n v (``inverse``: R_n^T v), for ``rotations`` (N, 3, 3) and
     ``vectors`` (N, 3), or (N, k, 3) for k vectors per matrix; the result has ``vectors``' shape.
@@ -110,6 +163,7 @@ class TorchRandom:
 
         self.device = torch.device(device)
         self.generator = torch.Generator(device=self.device)
+        self._column_bounds: dict[tuple[Any, ...], tuple[Any, ...]] = {}
         if seed is None:
             self.generator.seed()
         else:
@@ -124,6 +178,26 @@ class TorchRandom:
 
         draws = torch.rand(self._shape(size), generator=self.generator, dtype=torch.float64, device=self.device)
         return low + (high - low) * draws
+
+    def uniform_columns(self, n: int, bounds: tuple[tuple[float, float, int | None], ...]) -> list[Any]:
+        """:func:`uniform_columns` on this generator: one (n, columns) draw, scaled per column, split."""
+        import torch
+
+        if bounds not in self._column_bounds:  # per column: low, and high - low (made once per set of bounds)
+            widths = [1 if width is None else width for _, _, width in bounds]
+            lows = np.repeat([float(low) for low, _, _ in bounds], widths)
+            ranges = np.repeat([float(high) - float(low) for low, high, _ in bounds], widths)
+            self._column_bounds[bounds] = (
+                widths,
+                torch.as_tensor(lows, device=self.device),
+                torch.as_tensor(ranges, device=self.device),
+            )
+        widths, lows, ranges = self._column_bounds[bounds]
+        draws = torch.rand((n, sum(widths)), generator=self.generator, dtype=torch.float64, device=self.device)
+        pieces = split_columns(lows + ranges * draws, widths)
+        return [
+            piece if width is not None else piece[:, 0] for piece, (_, _, width) in zip(pieces, bounds, strict=True)
+        ]
 
     def integers(self, low: int, high: int, size: Any = 1) -> Any:
         """Integers in [low, high) of shape ``size``."""
@@ -154,6 +228,16 @@ class TorchRandom:
     def __setstate__(self, saved: dict[str, Any]) -> None:
         self.__init__(0, saved["device"])
         self.state = saved["state"]
+
+
+def uniform_columns(rng: Any, n: int, bounds: tuple[tuple[float, float, int | None], ...]) -> list[Any]:
+    """Uniform draws for ``n`` environments, one array per ``(low, high, width)`` of ``bounds``: U[low, high) of
+    shape (n, width), or (n,) where width is None. numpy's generator draws them one call after another, as
+    ``rng.uniform(low, high, size)`` would (its stream unchanged); a :class:`TorchRandom` draws them all at once,
+    one (n, columns) array scaled per column (three operations on a device, not three per array)."""
+    if isinstance(rng, np.random.Generator):
+        return [rng.uniform(low, high, size=n if width is None else (n, width)) for low, high, width in bounds]
+    return rng.uniform_columns(n, bounds)
 
 
 def random_generator(seed: int | None, reference: Any) -> Any:

@@ -1,4 +1,4 @@
-"""margin_rl.arrays: which namespace a computation's inputs get."""
+"""margin_rl.arrays: which namespace a computation's inputs get, and the few-operation helpers the equations share."""
 
 from __future__ import annotations
 
@@ -10,17 +10,24 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from benchmarks.tools.host_reads import DispatchCounter
 from margin_rl.arrays import (
     TorchRandom,
     constant,
     finite_mask,
+    finite_or_zero,
     generator_state,
     like,
     namespace,
     random_generator,
     rotate,
     set_generator_state,
+    split_columns,
+    take_last,
     to_numpy,
+    uniform_columns,
+    unstack,
+    write_where,
 )
 
 
@@ -123,3 +130,97 @@ def test_finite_mask_is_isfinite_on_numpy_and_torch(values: list[float]) -> None
         np.testing.assert_array_equal(finite_mask(host), np.isfinite(host))
         device = torch.as_tensor(host)
         assert torch.equal(finite_mask(device), torch.isfinite(device))
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=32), min_size=1, max_size=8))
+def test_finite_or_zero_is_where_finite_else_zero_on_numpy_and_torch(values: list[float]) -> None:
+    for dtype in (np.float32, np.float64):
+        host = np.array(values, dtype=dtype)
+        expected = np.where(np.isfinite(host), host, 0.0).astype(dtype)
+        assert finite_or_zero(host).tobytes() == expected.tobytes()  # bit for bit, the sign of a zero included
+        assert finite_or_zero(torch.as_tensor(host)).numpy().tobytes() == expected.tobytes()
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.integers(1, 4), min_size=1, max_size=5), st.integers(1, 3))
+def test_split_columns_and_unstack_are_the_slices_as_views(widths: list[int], n: int) -> None:
+    """The pieces are block[:, a:b] for consecutive ranges (views: a write shows in the block), one operation on
+    torch; unstack gives the columns."""
+    for block in (np.arange(n * sum(widths), dtype=np.float64).reshape(n, -1), torch.zeros(n, sum(widths))):
+        if isinstance(block, torch.Tensor):
+            block += torch.arange(n * sum(widths)).reshape(n, -1)
+        pieces = split_columns(block, widths)
+        starts = np.cumsum([0, *widths])
+        for piece, start, stop in zip(pieces, starts[:-1], starts[1:], strict=True):
+            assert to_numpy(piece).tolist() == to_numpy(block[:, start:stop]).tolist()
+        pieces[-1][...] = -1  # a view of the block
+        assert (to_numpy(block)[:, -widths[-1] :] == -1).all()
+        columns = unstack(block)
+        assert [to_numpy(c).tolist() for c in columns] == [to_numpy(block[:, k]).tolist() for k in range(sum(widths))]
+        cube = block.reshape(n, 1, -1)
+        assert [to_numpy(c).tolist() for c in unstack(cube, axis=-1)] == [
+            to_numpy(cube[..., k]).tolist() for k in range(sum(widths))
+        ]
+    counter = DispatchCounter()
+    with counter:
+        split_columns(torch.zeros(n, sum(widths)), widths)
+        unstack(torch.zeros(n, 3))
+    assert dict(counter.ops) == {"zeros": 2, "split_with_sizes": 1, "unbind": 1}
+
+
+def test_split_columns_refuses_widths_that_do_not_cover_the_block() -> None:
+    with pytest.raises(ValueError, match=r"column widths \[2, 2\] sum to 4, but the block has 5 columns"):
+        split_columns(np.zeros((2, 5)), [2, 2])
+
+
+def test_take_last_is_numpys_take_and_one_torch_operation() -> None:
+    values = np.arange(24.0).reshape(2, 3, 4)
+    index = np.array([3, 0, 0, 2])
+    expected = np.take(values, index, axis=-1)
+    assert take_last(values, index).tobytes() == expected.tobytes() and expected.flags.c_contiguous
+    values_t, index_t, counter = torch.as_tensor(values), torch.as_tensor(index), DispatchCounter()
+    with counter:
+        on_torch = take_last(values_t, index_t)
+    assert on_torch.numpy().tolist() == expected.tolist() and dict(counter.ops) == {"index_select": 1}
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 6), st.integers(1, 3), st.integers(0, 2**32 - 1), st.booleans())
+def test_write_where_writes_the_masked_rows_in_place(n: int, width: int, seed: int, scalar: bool) -> None:
+    """The rows where the mask holds take the values, the others keep theirs, in place, on numpy and torch; a mask
+    already shaped over the rows ((N, 1)) as well."""
+    rng = np.random.default_rng(seed)
+    mask, before = rng.random(n) < 0.5, rng.normal(size=(n, width))
+    values = 7.5 if scalar else rng.normal(size=(n, width))
+    expected = np.where(mask[:, None], values, before)
+    for kind in (np.asarray, torch.as_tensor):
+        for rows in (kind(mask), kind(mask)[:, None]):
+            target = kind(before.copy())
+            address = target.ctypes.data if isinstance(target, np.ndarray) else target.data_ptr()
+            write_where(target, rows, values if scalar else kind(values))
+            assert to_numpy(target).tolist() == expected.tolist()
+            assert address == (target.ctypes.data if isinstance(target, np.ndarray) else target.data_ptr())
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(1, 50), st.integers(0, 2**32 - 1), st.booleans())
+def test_uniform_columns_keep_numpys_stream_and_draw_once_on_torch(n: int, seed: int, friction: bool) -> None:
+    """numpy: the arrays one rng.uniform call after another would give, bit for bit (a reset's stream unchanged);
+    torch: one draw for all of them, each array within its bounds and of its shape."""
+    bounds = ((-1, 1, 12), (-1, 1, 6), *(((0.4, 1.2, None),) if friction else ()), (-0.5, 1.5, None), (0, 0, None))
+    expected_rng, rng = np.random.default_rng(seed), np.random.default_rng(seed)
+    expected = [expected_rng.uniform(lo, hi, size=n if w is None else (n, w)) for lo, hi, w in bounds]
+    drawn = uniform_columns(rng, n, bounds)
+    assert [a.tobytes() for a in drawn] == [a.tobytes() for a in expected]
+    assert rng.uniform() == expected_rng.uniform()  # the same count drawn
+    torch_rng = TorchRandom(seed, "cpu")
+    counter = DispatchCounter()
+    with counter:
+        on_torch = uniform_columns(torch_rng, n, bounds)
+    assert counter.random_numbers == n * (18 + len(bounds) - 2)
+    for array, (lo, hi, w) in zip(on_torch, bounds, strict=True):
+        assert tuple(array.shape) == ((n,) if w is None else (n, w)) and array.dtype == torch.float64
+        assert float(array.min()) >= lo and (float(array.max()) < hi or lo == hi)
+    again = uniform_columns(TorchRandom(seed, "cpu"), n, bounds)
+    assert all(torch.equal(a, b) for a, b in zip(on_torch, again, strict=True))

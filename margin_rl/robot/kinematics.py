@@ -16,7 +16,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from margin_rl.arrays import constant, namespace
+from margin_rl.arrays import constant, namespace, take_last
 
 
 class UnreachableFootError(ValueError):
@@ -50,7 +50,7 @@ def quat_wxyz_to_matrix(quat_wxyz: Any) -> Any:
     v1, v2 = xp.roll(v, -1, axis=-1), xp.roll(v, -2, axis=-1)
     product, turn = v * v1, w * v2
     entries = xp.concat([1 - 2 * (v1 * v1 + v2 * v2), 2 * (product - turn), 2 * (product + turn)], axis=-1)
-    rows = xp.take(entries, constant(_ROTATION_ENTRIES, entries), axis=-1)  # C order (numpy's [..., idx] is not)
+    rows = take_last(entries, constant(_ROTATION_ENTRIES, entries))  # C order (numpy's [..., idx] is not)
     return xp.reshape(rows, (*rows.shape[:-1], 3, 3))
 
 

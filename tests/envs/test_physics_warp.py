@@ -18,7 +18,7 @@ import pytest
 import torch
 
 import margin_rl  # noqa: F401 - registers the ids
-from margin_rl.arrays import TorchRandom, like, to_numpy
+from margin_rl.arrays import TorchRandom, like, to_numpy, uniform_columns
 from margin_rl.envs.backends import make_physics
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore
@@ -57,6 +57,9 @@ class _HostDrawsAsTensors:
 
     def exponential(self, *args: object, **kwargs: object) -> torch.Tensor:
         return torch.as_tensor(self.rng.exponential(*args, **kwargs))
+
+    def uniform_columns(self, n: int, bounds: tuple) -> list[torch.Tensor]:
+        return [torch.as_tensor(a) for a in uniform_columns(self.rng, n, bounds)]
 
 
 def _mirror(source: AnymalCore, target: AnymalCore) -> None:

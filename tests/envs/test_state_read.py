@@ -6,10 +6,12 @@ from __future__ import annotations
 import pickle
 
 import numpy as np
+import pytest
 
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore
-from margin_rl.envs.episode_state import EPISODE_STATE
+from margin_rl.envs.episode_state import EPISODE_STATE, episode_columns, episode_views
+from margin_rl.envs.state_read import _field_split
 from margin_rl.robot import mjcf_names as names
 
 CONFIG = EnvConfig(robot="anymal_c", randomization=RandomizationConfig(push_interval_s=0.1, friction=(0.4, 1.0)))
@@ -80,3 +82,20 @@ def test_the_episode_state_stays_views_of_its_packed_arrays_through_pickling() -
     clone.command[...] = core.command
     for action in actions:
         np.testing.assert_array_equal(core.step(action).observation, clone.step(action).observation)
+
+
+def test_the_read_splits_its_block_into_the_fields_and_the_columns_between() -> None:
+    names_, widths = _field_split({"b": slice(5, 7), "a": slice(0, 3)}, 9)
+    assert names_ == ("a", None, "b", None) and widths == (3, 2, 2, 2)
+    with pytest.raises(ValueError, match="'b' \\(columns 2:4\\) overlaps another"):
+        _field_split({"a": slice(0, 3), "b": slice(2, 4)}, 9)
+
+
+def test_a_resets_episode_columns_are_its_values_in_place_and_zeros_elsewhere() -> None:
+    start = {"command": np.full((2, 3), 0.5), "mu": np.full((2, 1), 0.8), "_prev_joint_vel": np.ones((2, 12))}
+    floats = np.concatenate(episode_columns(start, 2, np, None), axis=1)
+    assert floats.shape == (2, sum(EPISODE_STATE.values()))
+    views = episode_views(floats, np.zeros((2, 2), dtype=np.int64))
+    for name in EPISODE_STATE:
+        expected = start[name][:, 0] if name == "mu" else start.get(name, 0.0)
+        np.testing.assert_array_equal(views[name], expected, err_msg=name)

@@ -180,7 +180,8 @@ class StabilityState:
             expected = batch + (() if f.shape == (1,) else f.shape)
             if tuple(value.shape) != expected:
                 raise ValueError(f"StabilityState.{f.name} has shape {tuple(value.shape)}, expected {expected}")
-            parts.append(xp.reshape(value, (*batch, f.size)))
+            flat = (*batch, f.size)
+            parts.append(value if tuple(value.shape) == flat else xp.reshape(value, flat))
         return xp.concat(parts, axis=-1)
 
 

@@ -40,31 +40,21 @@ class StateReader:
         self._knees = index([physics.body_id(names.shank_body(leg)) for leg in legs])
         # Columns of the block: qpos | qvel | sensordata | feet (4 x 3) | knees (4 x 3).
         sensors = nq + nv
-        self._base_pos = _shifted(names.BASE_POSITION_QPOS, 0, nq)
-        self._quat = _shifted(names.BASE_QUATERNION_QPOS, 0, nq)
-        self._joint_pos = _shifted(names.JOINT_QPOS, 0, nq)
-        self._lin_vel = _shifted(names.BASE_LINEAR_VELOCITY_QVEL, nq, nv)
-        self._ang_vel = _shifted(names.BASE_ANGULAR_VELOCITY_QVEL, nq, nv)
-        self._joint_vel = _shifted(names.JOINT_QVEL, nq, nv)
-        self._com = _shifted(physics.sensor_slice(names.COM_SENSOR), sensors, nsensor)
-        self._com_vel = _shifted(physics.sensor_slice(names.COM_VELOCITY_SENSOR), sensors, nsensor)
-        self._feet_columns = slice(sensors + nsensor, sensors + nsensor + 12)
-        self._knee_columns = slice(sensors + nsensor + 12, sensors + nsensor + 24)
-        self._fields, self._widths = _field_split(
-            {
-                "base_pos": self._base_pos,
-                "quat": self._quat,
-                "joint_pos": self._joint_pos,
-                "lin_vel_world": self._lin_vel,
-                "ang_vel_body": self._ang_vel,
-                "joint_vel": self._joint_vel,
-                "com": self._com,
-                "com_vel": self._com_vel,
-                "feet": self._feet_columns,
-                "knees": self._knee_columns,
-            },
-            self._knee_columns.stop,
-        )
+        feet = sensors + nsensor
+        columns = {  # each field's columns in the block
+            "base_pos": _shifted(names.BASE_POSITION_QPOS, 0, nq),
+            "quat": _shifted(names.BASE_QUATERNION_QPOS, 0, nq),
+            "joint_pos": _shifted(names.JOINT_QPOS, 0, nq),
+            "lin_vel_world": _shifted(names.BASE_LINEAR_VELOCITY_QVEL, nq, nv),
+            "ang_vel_body": _shifted(names.BASE_ANGULAR_VELOCITY_QVEL, nq, nv),
+            "joint_vel": _shifted(names.JOINT_QVEL, nq, nv),
+            "com": _shifted(physics.sensor_slice(names.COM_SENSOR), sensors, nsensor),
+            "com_vel": _shifted(physics.sensor_slice(names.COM_VELOCITY_SENSOR), sensors, nsensor),
+            "feet": slice(feet, feet + 12),
+            "knees": slice(feet + 12, feet + 24),
+        }
+        self._quat, self._ang_vel = columns["quat"], columns["ang_vel_body"]  # read raw in a finite read
+        self._fields, self._widths = _field_split(columns, feet + 24)
         # First entry ("found") of each contact sensor: the feet, the thighs, the base, compared in one gather.
         found = [physics.sensor_adr(names.foot_contact_sensor(leg)) for leg in legs]
         found += [physics.sensor_adr(names.thigh_contact_sensor(leg)) for leg in legs]

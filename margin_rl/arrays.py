@@ -9,6 +9,7 @@ for any other kind.
 
 from __future__ import annotations
 
+from itertools import accumulate
 from typing import Any
 
 import numpy as np
@@ -72,10 +73,11 @@ def split_columns(block: Any, widths: Any) -> tuple[Any, ...]:
     operation on torch (``split``; numpy: the slices): a block read once and named by parts, without a slice
     dispatched per part."""
     widths = [int(w) for w in widths]
-    if sum(widths) != int(block.shape[1]):
-        raise ValueError(f"column widths {widths} sum to {sum(widths)}, but the block has {block.shape[1]} columns")
+    stops = list(accumulate(widths))
+    if not stops or stops[-1] != int(block.shape[1]):
+        total = stops[-1] if stops else 0
+        raise ValueError(f"column widths {widths} sum to {total}, but the block has {block.shape[1]} columns")
     if namespace(block) is np:  # slices (numpy's split is the same views, made in Python at more cost)
-        stops = np.cumsum(widths).tolist()
         return tuple(block[:, stop - width : stop] for width, stop in zip(widths, stops, strict=True))
     return tuple(block.split(widths, dim=1))
 

@@ -76,6 +76,7 @@ from margin_rl.envs.step_data import (
     SimulationState,
     StepOutput,
     check_finite_outputs,
+    estimate_accelerations,
     finite_output_hint,
 )
 from margin_rl.envs.step_graph import step_graph_for
@@ -474,15 +475,21 @@ class AnymalCore:
         context = (self.command, self._torque_at_limit, levels)
         info = step_info(state, acc, values, terms, margin, lam, stability, diverged, causes, *context)
         observation = self._observe(values)
-        final_observation = self.xp.asarray(observation, copy=True)
-        done = terminated | truncated
-        if self.autoreset and self.sync_free:  # every row reset where done, observed again where done
+        done, masked_reset, privileged = terminated | truncated, self.autoreset and self.sync_free, None
+        # the observation before any reset: a copy where a reset writes rows in place (a masked one makes a new array)
+        final_observation = observation if masked_reset else self.xp.asarray(observation, copy=True)
+        if masked_reset:  # every row reset where done, observed again where done
             after_reset = self._reset_rows(ResetRows.where(done))
-            observation = self.xp.where(done[:, None], self._observe_state(after_reset, slice(None)), observation)
+            ground = self._ground.reset_heights(after_reset, cfg, self._foot_offsets)  # the scan's and the critic's
+            first = self._observe_state(after_reset, slice(None), ground.get("scan"))
+            observation = self.xp.where(done[:, None], first, observation)
+            if "around_feet" in ground:  # the critic's: every row's state now is the read after the reset
+                privileged = self._privileged(after_reset.feet, ground["around_feet"])
         elif self.autoreset and bool(self.xp.any(done)):
             ids = self.xp.nonzero(done)[0]
             observation[ids] = self._observe_state(self._reset_rows(ResetRows.at(ids)), ids)
-        privileged = self.privileged_observation() if cfg.privileged_observations else None
+        if cfg.privileged_observations and privileged is None:
+            privileged = self.privileged_observation()
         if self.sync_free:  # flags, which step reads every check_every steps
             self._checks.record_step(self._nonfinite_action, reward, (observation, final_observation))
         else:
@@ -504,7 +511,7 @@ class AnymalCore:
         elif not bool(xp.all(usable)):
             raise ValueError("actions contain NaN or inf")
         a = xp.clip(a, -ACTION_BOUND, ACTION_BOUND)
-        self.physics.ctrl[:] = self._cast(self._key_ctrl + self.config.action_scale * a, self.physics.ctrl)
+        self.physics.ctrl[:] = self._key_ctrl + self.config.action_scale * a  # cast to the physics' dtype as written
         self._apply_pushes()
         return a
 
@@ -551,17 +558,12 @@ class AnymalCore:
 
     def _estimate_accelerations(self, state: SimulationState) -> Accelerations:
         """Finite differences of the velocities over the policy step, the CoM and base ones EMA-filtered."""
+        velocities = self.xp.concat((state.com_vel, state.ang_vel_world, state.joint_vel), axis=1)
         alpha = self.config.acceleration_filter
-        com_acc = (state.com_vel - self._prev_com_vel) / self.dt
-        ang_acc = (state.ang_vel_world - self._prev_ang_vel) / self.dt
-        com_filtered = alpha * self._com_acc + (1 - alpha) * com_acc
-        ang_filtered = alpha * self._ang_acc + (1 - alpha) * ang_acc
-        joint_acc = (state.joint_vel - self._prev_joint_vel) / self.dt
+        acc, filtered = estimate_accelerations(velocities, self._prev_velocities, self._filtered_acc, alpha, self.dt)
         # the state in place (fixed addresses, what a recorded graph needs); the step's values are its own arrays
-        self._com_acc[...], self._ang_acc[...] = com_filtered, ang_filtered
-        self._prev_com_vel[...], self._prev_ang_vel[...] = state.com_vel, state.ang_vel_world
-        self._prev_joint_vel[...] = state.joint_vel
-        return Accelerations(com_filtered, ang_filtered, joint_acc, com_acc, ang_acc)
+        self._filtered_acc[...], self._prev_velocities[...] = filtered, velocities
+        return acc
 
     def _stability(self, state: SimulationState, acc: Accelerations, normals: Any) -> tuple[StabilityState, Any, Any]:
         """lambda's fields, the clipped margin (N,) and lambda (N, 47), one evaluation for the batch (kept as
@@ -574,11 +576,12 @@ class AnymalCore:
             acc.com,
             acc.base_angular,
             ext_force,
-            self.xp.zeros_like(ext_force),
+            self._push_torque,  # always 0
             state.feet,
             self.mu,
             state.contacts,
             normals,
+            heading=state.heading_rot,
         )
         lam = stability.to_lambda()
         margin = self.xp.clip(self._margin_fn(lam), *MARGIN_CLIP)
@@ -586,10 +589,8 @@ class AnymalCore:
         return stability, margin, lam
 
     def _track_air_time(self, contacts: Array) -> tuple[Array, Array]:
-        """Touchdowns (N, 4) and each touching-down foot's time in the air [s] (0 elsewhere).
-
-        Kept before the rewards so that a zero reward weight changes nothing.
-        """
+        """Touchdowns (N, 4) and each touching-down foot's time in the air [s] (0 elsewhere); kept before the
+        rewards so that a zero reward weight changes nothing."""
         xp = self.xp
         touchdown = contacts & ~self._prev_contacts
         self._air_time += self.dt
@@ -624,7 +625,7 @@ class AnymalCore:
         ids, force = checked_push(ids, force, duration_s, frame, self.num_envs)
         ids, force = self._index(ids), self._array(force)
         if frame == "heading":
-            force = rotate(heading_rotation(self._read(ids).base_rot), force)
+            force = rotate(self._read(ids).heading_rot, force)
         self._push_force[ids] = force
         self._push_steps_left[ids] = self.push_steps(duration_s)
 
@@ -635,8 +636,6 @@ class AnymalCore:
     def _apply_pushes(self) -> None:
         """Write the running pushes (random ones of :class:`RandomizationConfig`, and :meth:`push`) to the base."""
         rnd = self.config.randomization
-        xfrc = self.physics.xfrc_applied
-        xfrc[:, self._base, :] = 0.0
         if rnd.push_interval_s is not None:
             start_random_pushes(
                 self._next_push, self._push_force, self._push_steps_left, self.rng, rnd, self.dt, self.sync_free
@@ -644,7 +643,7 @@ class AnymalCore:
         active = self._push_steps_left > 0
         # The force of this step, kept for lambda: the counter below already reads 0 during a push's last step.
         self._push_applied[...] = self.xp.where(active[:, None], self._push_force, 0.0)
-        xfrc[:, self._base, :3] = self._cast(self._push_applied, xfrc)
+        self.physics.xfrc_applied[:, self._base, :] = self._push_wrench  # the force, and no torque
         self._push_steps_left[...] = self.xp.clip(self._push_steps_left - 1, min=0)
 
     # ------------------------------------------------------------------ observations
@@ -652,9 +651,9 @@ class AnymalCore:
         noise = self.config.randomization.observation_noise
         return assemble({**values, "last_action": self.last_action}, self._policy_terms, noise, self.rng)
 
-    def _observe_state(self, state: SimulationState, ids: Any) -> Any:
-        """Policy observations of environments ``ids`` in ``state`` (their state, read)."""
-        values = {**self._policy_values(state, ids), "last_action": self.last_action[ids]}
+    def _observe_state(self, state: SimulationState, ids: Any, scan_heights: Any = None) -> Any:
+        """Policy observations of environments ``ids`` in ``state`` (read), ``scan_heights`` as in _policy_values."""
+        values = {**self._policy_values(state, ids, scan_heights), "last_action": self.last_action[ids]}
         noise = self.config.randomization.observation_noise
         return assemble(values, self._policy_terms, noise, self.rng)
 
@@ -679,9 +678,12 @@ class AnymalCore:
 
     def privileged_observation(self) -> Array:
         """Critic group: terrain heights around the feet, friction and the current margin."""
-        feet = self._float(self.physics.site_xpos[:, self._reader.feet_sites])
+        return self._privileged(self._float(self.physics.site_xpos[:, self._reader.feet_sites]))
+
+    def _privileged(self, feet: Any, around_feet: Any = None) -> Array:
+        """The critic group with the feet (N, 4, 3) [m] (and the ground around them, where it was looked up)."""
         values = {
-            "foot_terrain_heights": self._ground.heights_around(feet, self._foot_offsets),
+            "foot_terrain_heights": self._ground.heights_around(feet, self._foot_offsets, around_feet),
             "friction": self.mu[:, None],
             "margin": self._last_margin[:, None],
         }

@@ -10,10 +10,9 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from margin_rl.arrays import namespace, rotate
+from margin_rl.arrays import namespace, rotate, split_columns
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.observations import HEIGHT_SCAN_CLIP
-from margin_rl.envs.stability_input import heading_rotation
 from margin_rl.envs.step_data import SimulationState
 from margin_rl.envs.terrain import (
     STEP_EDGE_RISE,
@@ -39,10 +38,9 @@ class GroundQueries:
         ("knees", (N, 4): with the knee-clearance term), the feet's normal stencils ("normals", (N, 4, 4): with
         terrain normals in lambda) and soles ("soles", (N, 4, 9)) on rough ground, and the height scan's points
         ("scan", (N, P): with the scan)."""
-        xp, terrain = namespace(state.base_pos), self.terrain
-        n = int(state.base_pos.shape[0])
+        terrain = self.terrain
         feet_xy = state.feet[..., :2]
-        groups = {"base": ((1,), lambda: state.base_pos[:, None, :2])}  # name: (shape, its points (N, *shape, 2))
+        groups = {"base": ((), lambda: state.base_pos[:, :2])}  # name: (shape, its points (N, *shape, 2))
         if "knee_clearance" in config.reward_weights:
             groups["knees"] = ((4,), lambda: state.knees[..., :2])
         if not terrain.is_flat:
@@ -51,26 +49,44 @@ class GroundQueries:
             groups["soles"] = ((4, 9), lambda: spread_stencil(feet_xy, self.foot_radius))
         if config.height_scan:
             groups["scan"] = ((self.scan_offsets.shape[0],), lambda: self.scan_points(state))
+        return self.lookup(groups, int(state.base_pos.shape[0]), state.base_pos)
+
+    def reset_heights(self, state: SimulationState, config: EnvConfig, foot_offsets: Any) -> dict[str, Any]:
+        """The ground heights [m] a reset's first observations look up, in one lookup: the height scan's points
+        ("scan", (N, P): with the scan) and, for the critic, the points ``foot_offsets`` (K, 2) around each foot
+        ("around_feet", (N, 4, K): with privileged observations; :meth:`heights_around`)."""
+        groups = {}
+        if config.height_scan:
+            groups["scan"] = ((self.scan_offsets.shape[0],), lambda: self.scan_points(state))
+        if config.privileged_observations:
+            shape = (4, int(foot_offsets.shape[0]))
+            groups["around_feet"] = (shape, lambda: around_points(state.feet, foot_offsets))
+        return self.lookup(groups, int(state.base_pos.shape[0]), state.base_pos)
+
+    def lookup(self, groups: dict[str, tuple[tuple[int, ...], Any]], n: int, reference: Any) -> dict[str, Any]:
+        """The ground heights [m] under named groups of points, looked up at once: ``groups``: name -> (shape,
+        a function returning its points (n, *shape, 2), called only on rough ground); returns name -> (n, *shape).
+        ``reference``: an array of the core's kind and device (flat ground's zeros)."""
+        if not groups:
+            return {}
+        xp = namespace(reference)
         shapes = {name: shape for name, (shape, _) in groups.items()}
-        if terrain.is_flat:  # the ground is at 0 everywhere: nothing to look up
-            total = sum(math.prod(shape) for shape in shapes.values())
-            heights = xp.zeros((n, total), dtype=xp.float64, device=state.base_pos.device)
+        sizes = [math.prod(shape) for shape in shapes.values()]
+        if self.terrain.is_flat:  # the ground is at 0 everywhere: nothing to look up
+            heights = xp.zeros((n, sum(sizes)), dtype=xp.float64, device=reference.device)
         else:
             points = [xp.reshape(points(), (n, -1, 2)) for _, points in groups.values()]
-            heights = terrain.height(xp.concat(points, axis=1))
-        found, start = {}, 0
-        for name, shape in shapes.items():
-            size = math.prod(shape)
-            found[name] = xp.reshape(heights[:, start : start + size], (n, *shape))
-            start += size
-        found["base"] = found["base"][:, 0]
-        return found
+            heights = self.terrain.height(xp.concat(points, axis=1))
+        pieces = split_columns(heights, sizes) if len(sizes) > 1 else (heights,)
+        return {
+            name: xp.reshape(piece, (n, *shape)) for (name, shape), piece in zip(shapes.items(), pieces, strict=True)
+        }
 
     def scan_points(self, state: SimulationState) -> Any:
         """(N, P, 2) the height scan's points (around the base, turned with its yaw) [m]."""
         xp, n = namespace(state.base_pos), int(state.base_pos.shape[0])
         offsets = xp.broadcast_to(self.scan_offsets, (n, *self.scan_offsets.shape))
-        return (state.base_pos[:, None, :] + rotate(heading_rotation(state.base_rot), offsets))[..., :2]
+        return (state.base_pos[:, None, :] + rotate(state.heading_rot, offsets))[..., :2]
 
     def height_scan(self, state: SimulationState, heights: Any = None) -> Any:
         """(N, P) base height above the terrain at the scan points (``heights`` (N, P) the ground there, looked up
@@ -80,11 +96,13 @@ class GroundQueries:
         below = state.base_pos[:, None, 2] - heights - self.standing_height
         return namespace(below).clip(below, -HEIGHT_SCAN_CLIP, HEIGHT_SCAN_CLIP)
 
-    def heights_around(self, points: Any, offsets: Any) -> Any:
+    def heights_around(self, points: Any, offsets: Any, ground: Any = None) -> Any:
         """(N, k K) the height of ``points`` (N, k, 3) above the ground at each of ``offsets`` (K, 2) [m] around them
-        (the critic's terrain around the feet)."""
-        around = points[:, :, None, :2] + offsets[None, None]
-        heights = points[:, :, None, 2] - self.terrain.height(around)
+        (the critic's terrain around the feet); ``ground`` (N, k, K): the ground there where it was looked up
+        already (:meth:`reset_heights`)."""
+        if ground is None:
+            ground = self.terrain.height(around_points(points, offsets))
+        heights = points[:, :, None, 2] - ground
         return namespace(heights).reshape(heights, (int(points.shape[0]), -1))
 
     def contact_normals(self, state: SimulationState, ground: dict[str, Any]) -> Any:
@@ -100,3 +118,8 @@ class GroundQueries:
         if "soles" not in ground:
             return namespace(touchdown).zeros_like(touchdown)
         return touchdown & (spread_of_heights(ground["soles"]) > STEP_EDGE_RISE)
+
+
+def around_points(points: Any, offsets: Any) -> Any:
+    """(N, k, K, 2) the horizontal points ``offsets`` (K, 2) [m] around each of ``points`` (N, k, 3)."""
+    return points[:, :, None, :2] + offsets[None, None]

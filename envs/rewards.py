@@ -14,7 +14,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from margin_rl.arrays import namespace
+import numpy as np
+
+from margin_rl.arrays import constant, namespace, unstack
 
 Arrays = dict[str, Any]
 """Per-environment arrays by name, all numpy or all torch (float64, bool for flags)."""
@@ -184,7 +186,10 @@ def compute_rewards(weights: dict[str, float], s: Arrays, gain: float) -> tuple[
     unknown = set(weights) - set(REWARD_TERMS)
     if unknown:
         raise ValueError(f"unknown reward terms {sorted(unknown)}; known: {sorted(REWARD_TERMS)}")
-    terms = {name: w * REWARD_TERMS[name](s, gain) for name, w in weights.items()}
     xp = namespace(s["margin"])
-    total = xp.sum(xp.stack(list(terms.values())), axis=0) if terms else xp.zeros_like(s["margin"], dtype=xp.float64)
-    return total, terms
+    if not weights:
+        return xp.zeros_like(s["margin"], dtype=xp.float64), {}
+    # every term weighted in one product and summed in one reduction (term by term, in the weights' order)
+    unweighted = xp.stack([REWARD_TERMS[name](s, gain) for name in weights])  # (terms, N), float64
+    weighted = unweighted * constant(np.array(list(weights.values()), dtype=np.float64)[:, None], unweighted)
+    return xp.sum(weighted, axis=0), dict(zip(weights, unstack(weighted, axis=0), strict=True))

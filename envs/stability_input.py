@@ -44,18 +44,20 @@ def stability_state_from_simulation(
     mu: Any,
     contacts: Any,
     normals: Any,
+    heading: Any = None,
 ) -> StabilityState:
     """lambda's fields (N, ...) from world-frame simulator quantities (all (N, ...), world frame, SI units; all
     numpy arrays or all torch tensors).
 
     e_g is the third row of the base rotation R_WB; every other vector v is rotated into H as
     R_WH^T v, and the feet are taken relative to the CoM first: the 13 vectors of an environment in one batched
-    product.
+    product. ``heading``: R_WH where the caller has it already (:func:`heading_rotation` of ``base_rotation``).
     """
     xp = namespace(base_rotation)
     single = xp.stack([com_vel, com_acc, base_ang_acc, ext_force, ext_torque], axis=1)  # (N, 5, 3)
     vectors = xp.concat([single, feet - com[:, None, :], normals], axis=1)  # (N, 5 + 4 + 4, 3), world frame
-    in_h = rotate(heading_rotation(base_rotation), vectors, inverse=True)
+    heading = heading_rotation(base_rotation) if heading is None else heading
+    in_h = rotate(heading, vectors, inverse=True)
     com_vel_h, com_acc_h, base_ang_acc_h, ext_force_h, ext_torque_h = unstack(in_h)[:5]
     return StabilityState(
         gravity_axis=base_rotation[:, 2, :],

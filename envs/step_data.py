@@ -4,13 +4,15 @@ that no non-finite output leaves a step."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from margin_rl.arrays import Array, namespace, to_numpy
+from margin_rl.arrays import Array, namespace, split_columns, to_numpy
 from margin_rl.envs.config import EnvConfig
+from margin_rl.envs.stability_input import heading_rotation
 
 
 @dataclass(frozen=True)
@@ -33,6 +35,12 @@ class SimulationState:
     thigh_contacts: Array  # (N, 4) bool
     knees: Array  # (N, 4, 3) knee (KFE joint) positions [m]
 
+    @functools.cached_property
+    def heading_rot(self) -> Array:
+        """(N, 3, 3) R_WH, the horizontal frame in the world (the base's yaw: :func:`~margin_rl.envs.stability_input.
+        heading_rotation`), computed once for everything a step turns into it (lambda, the height scan)."""
+        return heading_rotation(self.base_rot)
+
 
 @dataclass(frozen=True)
 class Accelerations:
@@ -48,6 +56,21 @@ class Accelerations:
     joints: Array  # (N, 12) [rad/s^2], unfiltered
     com_measured: Array  # (N, 3) [m/s^2], unfiltered
     base_angular_measured: Array  # (N, 3) [rad/s^2], unfiltered
+
+
+def estimate_accelerations(
+    velocities: Array, previous: Array, filtered: Array, alpha: float, dt: float
+) -> tuple[Accelerations, Array]:
+    """The accelerations over a policy step of ``dt`` [s] from ``velocities`` (N, 18) = [CoM velocity (3) [m/s] |
+    base angular velocity, world frame (3) [rad/s] | joint velocities (12) [rad/s]] and the previous step's
+    ``previous`` (N, 18): the finite differences a_fd = (v - v_prev) / dt, the first six also filtered by the EMA
+    a = alpha a_prev + (1 - alpha) a_fd over the previous step's filtered ones ``filtered`` (N, 6). Returns the
+    :class:`Accelerations` and the new filtered (N, 6) to keep; one operation per stage for all the columns."""
+    differences = (velocities - previous) / dt
+    new_filtered = alpha * filtered + (1 - alpha) * differences[:, :6]
+    com_acc, ang_acc, joint_acc = split_columns(differences, (3, 3, 12))
+    com_filtered, ang_filtered = split_columns(new_filtered, (3, 3))
+    return Accelerations(com_filtered, ang_filtered, joint_acc, com_acc, ang_acc), new_filtered
 
 
 @dataclass(frozen=True)

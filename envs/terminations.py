@@ -17,7 +17,6 @@ read off zeros would mean nothing.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -84,4 +83,5 @@ def termination_causes(inputs: Arrays, bounds: TerminationConfig) -> dict[str, A
 def any_cause(causes: dict[str, Any]) -> Any:
     """``terminated``: (N,) True where any cause holds."""
     flags = [causes[name] for name in CAUSE_NAMES]
-    return functools.reduce(namespace(*flags).logical_or, flags)
+    xp = namespace(*flags)
+    return xp.any(xp.stack(flags, axis=1), axis=1)  # one reduction, not an OR per cause

@@ -151,8 +151,11 @@ class Terrain:
         corner = cell_row * columns + cell_column
         corners = xp.reshape(h, (-1,))[corner[..., None] + constant(np.array([0, 1, columns, columns + 1]), corner)]
         h00, h01, h10, h11 = unstack(corners, axis=-1)
-        # Triangle (00, 01, 11) where fu >= fv, triangle (00, 10, 11) elsewhere.
-        return xp.where(fu >= fv, h00 + fu * (h01 - h00) + fv * (h11 - h01), h00 + fv * (h10 - h00) + fu * (h11 - h10))
+        # Triangle (00, 01, 11) where fu >= fv: h00 + fu (h01 - h00) + fv (h11 - h01); triangle (00, 10, 11) elsewhere:
+        # h00 + fv (h10 - h00) + fu (h11 - h10). One formula over the triangle's middle corner and its fractions.
+        upper = fu >= fv
+        middle, along, across = xp.where(upper, h01, h10), xp.where(upper, fu, fv), xp.where(upper, fv, fu)
+        return h00 + along * (middle - h00) + across * (h11 - middle)
 
     def normal(self, xy: Any) -> Any:
         """Unit terrain normals (..., 3) under points (..., 2), from central differences of the height."""

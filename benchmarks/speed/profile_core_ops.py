@@ -8,6 +8,7 @@ its physics, counts the aten operations it dispatches per step, its host reads a
 torch.profiler's nested ones), and with ``--rsl`` the host reads of rsl-rl's training loop over the adapter::
 
     python benchmarks/speed/profile_core_ops.py [--num-envs 16] [--steps 20] [--env margin_rl/AnymalC-v1] [--rsl]
+        [--by-source 30]
 """
 
 from __future__ import annotations
@@ -34,6 +35,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--recipe", default=RECIPE)
     parser.add_argument("--top", type=int, default=20, help="operations listed, most frequent first")
     parser.add_argument("--rsl", action="store_true", help="also count the host reads of rsl-rl's training loop")
+    parser.add_argument(
+        "--by-source",
+        type=int,
+        default=0,
+        metavar="K",
+        help="also the operations per module and the K source lines that dispatch the most (slower)",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     core = make_core(args.num_envs, "cpu", "learned", args.env, args.recipe)
@@ -55,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
         core.step(actions[k])
     total = (time.perf_counter() - start) / args.steps
     physics = physics_seconds[0] / args.steps
-    counter = DispatchCounter()
+    counter = DispatchCounter(by_source=args.by_source > 0)
     with counter:
         for k in range(5 + args.steps, 5 + 2 * args.steps):
             core.step(actions[k])
@@ -69,9 +77,28 @@ def main(argv: list[str] | None = None) -> int:
     print("\n| operation | dispatched per step |\n|---|---|")
     for name, count in counter.ops.most_common(args.top):
         print(f"| `{name}` | {count / args.steps:.0f} |")
+    if args.by_source:
+        print("\n" + by_source(counter, args.steps, args.by_source))
     if args.rsl:
         print("\n" + rsl_host_reads(args.env, args.recipe, args.num_envs))
     return 0
+
+
+def by_source(counter: DispatchCounter, steps: int, top: int) -> str:
+    """Markdown: the operations per step each module of the package dispatches, then the ``top`` source lines that
+    dispatch the most, with their operations."""
+    modules: dict[str, float] = {}
+    for line, ops in counter.sources.items():
+        module = line.rsplit(":", 1)[0]
+        modules[module] = modules.get(module, 0.0) + sum(ops.values()) / steps
+    lines = ["| module | operations per step |", "|---|---|"]
+    lines += [f"| `{m}` | {n:.0f} |" for m, n in sorted(modules.items(), key=lambda item: -item[1])]
+    lines += ["", "| source line | operations per step | of them |", "|---|---|---|"]
+    ranked = sorted(counter.sources.items(), key=lambda item: -sum(item[1].values()))[:top]
+    for line, ops in ranked:
+        detail = ", ".join(f"{name} {n / steps:g}" for name, n in ops.most_common())
+        lines.append(f"| `{line}` | {sum(ops.values()) / steps:g} | {detail} |")
+    return "\n".join(lines)
 
 
 def rsl_host_reads(env_id: str, recipe: str, num_envs: int, rollout: int = 8) -> str:

@@ -4,7 +4,9 @@ CPU device, where a host read costs nothing but is dispatched as it would be on 
 
 from __future__ import annotations
 
+import sys
 from collections import Counter
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -17,20 +19,30 @@ INDEXING = frozenset({"index", "index_put", "index_put_"})
 RANDOM = frozenset({"rand", "randint", "randn", "exponential", "exponential_", "uniform_", "normal_", "random_"})
 
 
+SOURCES = tuple(str(Path(__file__).resolve().parents[2] / folder) for folder in ("envs", "margin_rl"))
+"""The package's source folders, whose lines :class:`DispatchCounter` attributes operations to (``by_source``)."""
+
+
 class DispatchCounter(TorchDispatchMode):
     """Counts per aten operation (:attr:`ops`), host reads (:attr:`host_reads`: by name, a boolean-mask indexing
-    as ``index[bool]``) and random numbers drawn (:attr:`random_numbers`)."""
+    as ``index[bool]``) and random numbers drawn (:attr:`random_numbers`); with ``by_source``, also per line of the
+    package's source that dispatched them (:attr:`sources`: ``"envs/core.py:512"`` -> operation -> count, the
+    innermost line outside ``margin_rl/arrays.py``'s helpers; slow: a look at the stack per operation)."""
 
-    def __init__(self) -> None:
+    def __init__(self, by_source: bool = False) -> None:
         super().__init__()
         self.ops: Counter[str] = Counter()
         self.host_reads: Counter[str] = Counter()
         self.random_numbers = 0
+        self.by_source = by_source
+        self.sources: dict[str, Counter[str]] = {}
 
     def __torch_dispatch__(self, func: Any, types: Any, args: tuple = (), kwargs: dict | None = None) -> Any:
         kwargs = kwargs or {}
         name = func.overloadpacket.__name__
         self.ops[name] += 1
+        if self.by_source:
+            self.sources.setdefault(_source_line(), Counter())[name] += 1
         if name in HOST_READS:
             self.host_reads[name] += 1
         if name in INDEXING and len(args) > 1:
@@ -45,3 +57,16 @@ class DispatchCounter(TorchDispatchMode):
     @property
     def total(self) -> int:
         return sum(self.ops.values())
+
+
+def _source_line() -> str:
+    """The innermost frame of the caller's stack in the package's source (an array helper's caller, not the
+    helper), as ``<folder>/<file>:<line>``; "elsewhere" when none is."""
+    frame = sys._getframe(2)
+    while frame is not None:
+        path = frame.f_code.co_filename
+        if path.startswith(SOURCES) and not path.endswith("arrays.py"):
+            root = str(Path(SOURCES[0]).parent) + "/"
+            return f"{path.removeprefix(root)}:{frame.f_lineno}"
+        frame = frame.f_back
+    return "elsewhere"

@@ -23,10 +23,23 @@ class UnreachableFootError(ValueError):
     """A foot target lies outside the leg workspace or needs a joint beyond its limits."""
 
 
-_ROTATION_ENTRIES = np.array([0, 3, 8, 6, 1, 4, 5, 7, 2])
-"""Where R's entries (row-major) sit in [diagonal (3) | above the diagonal (3) | below it (3)] of
-:func:`quat_wxyz_to_matrix`: R00 = d0, R01 = a0, R02 = b2, R10 = b0, R11 = d1, R12 = a1, R20 = a2, R21 = b1,
-R22 = d2."""
+def _rotation_factors() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The factors of R's entries (row-major) as products of a unit quaternion's components (w, x, y, z), for
+    :func:`quat_wxyz_to_matrix`: entry k is built from f_k + g_k, f_k = q[left[k]] q[right[k]] and g_k =
+    sign[9 + k] q[left[9 + k]] q[right[9 + k]] (the sign on the left factor); returns (left, right, sign), (18,) each.
+    """
+    left, right, sign = np.zeros(18, dtype=np.int64), np.zeros(18, dtype=np.int64), np.ones(18)
+    for i in range(3):  # v_i = q[1 + i]; v' and v'' the vector turned once and twice
+        v, v1, v2 = 1 + i, 1 + (i + 1) % 3, 1 + (i + 2) % 3
+        diagonal, above, below = 4 * i, 3 * i + (i + 1) % 3, 3 * ((i + 1) % 3) + i
+        left[diagonal], right[diagonal], left[9 + diagonal], right[9 + diagonal] = v1, v1, v2, v2
+        for k, turn_sign in ((above, -1.0), (below, 1.0)):
+            left[k], right[k], left[9 + k], right[9 + k], sign[9 + k] = v, v1, 0, v2, turn_sign
+    return left, right, sign
+
+
+_ROTATION_LEFT, _ROTATION_RIGHT, _ROTATION_SIGN = _rotation_factors()
+_DIAGONAL = np.eye(3, dtype=bool).reshape(9)
 
 
 def quat_wxyz_to_matrix(quat_wxyz: Any) -> Any:
@@ -40,18 +53,19 @@ def quat_wxyz_to_matrix(quat_wxyz: Any) -> Any:
         R_i,i+1    = 2 (v_i v'_i - w v''_i)
         R_i+1,i    = 2 (v_i v'_i + w v''_i)
 
-    the textbook entries (e.g. R_01 = 2 (xy - wz)), all nine computed as three vectors: a few operations whatever
-    the batch (each one a kernel launch on a device).
+    the textbook entries (e.g. R_01 = 2 (xy - wz)), all nine computed at once from two gathers of q: a few
+    operations whatever the batch (each one a kernel launch on a device).
     """
     xp = namespace(quat_wxyz)
     q = xp.astype(xp.asarray(quat_wxyz), xp.float64, copy=False)
     q = q / xp.linalg.vector_norm(q, axis=-1, keepdims=True)
-    w, v = q[..., :1], q[..., 1:]
-    v1, v2 = xp.roll(v, -1, axis=-1), xp.roll(v, -2, axis=-1)
-    product, turn = v * v1, w * v2
-    entries = xp.concat([1 - 2 * (v1 * v1 + v2 * v2), 2 * (product - turn), 2 * (product + turn)], axis=-1)
-    rows = take_last(entries, constant(_ROTATION_ENTRIES, entries))  # C order (numpy's [..., idx] is not)
-    return xp.reshape(rows, (*rows.shape[:-1], 3, 3))
+    # the 18 products in R's row-major order, f_k then g_k (_rotation_factors): v'_i^2 and v''_i^2 on the diagonal,
+    # v_i v'_i and -+w v''_i off it (a sign on a factor is exact), so each f_k + g_k is the textbook sum, bit for bit
+    products = take_last(q, constant(_ROTATION_LEFT, q)) * constant(_ROTATION_SIGN, q)
+    products = products * take_last(q, constant(_ROTATION_RIGHT, q))
+    twice = 2 * (products[..., :9] + products[..., 9:])
+    entries = xp.where(constant(_DIAGONAL, q), 1 - twice, twice)
+    return xp.reshape(entries, (*entries.shape[:-1], 3, 3))
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,33 @@ def test_every_reward_term_is_the_same_on_torch(seed: int, gain: float) -> None:
     np.testing.assert_allclose(total_t.numpy(), total, rtol=1e-12, atol=1e-12)
 
 
+@settings(max_examples=15, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    weights=st.lists(st.floats(-5.0, 5.0), min_size=len(REWARD_TERMS), max_size=len(REWARD_TERMS)),
+)
+def test_each_weighted_term_is_its_weight_times_the_term_and_the_reward_their_sum(
+    seed: int, weights: list[float]
+) -> None:
+    """The terms are weighted in one product and summed in one reduction: each equals weight x term bit for bit, and
+    the reward the terms added one after another in the weights' order (numpy's order, bit for bit; torch's reduction
+    keeps several partial sums, to rounding)."""
+    inputs = reward_inputs(np.random.default_rng(seed))
+    weighting = dict(zip(REWARD_TERMS, weights, strict=True))
+    for arrays in (inputs, on_torch(inputs)):
+        total, terms = compute_rewards(weighting, arrays, 8.0)
+        assert list(terms) == list(weighting)
+        expected_total = 0.0
+        for name, weight in weighting.items():
+            expected = weight * np.asarray(REWARD_TERMS[name](arrays, 8.0), dtype=np.float64)
+            np.testing.assert_array_equal(np.asarray(terms[name]), expected, err_msg=name)
+            expected_total = expected_total + expected
+        if isinstance(total, np.ndarray):
+            np.testing.assert_array_equal(total, expected_total)
+        else:
+            np.testing.assert_allclose(total.numpy(), expected_total, rtol=1e-12, atol=1e-12)
+
+
 def test_the_terms_hold_their_hand_computed_values() -> None:
     """The kernel's peak and tails, and the clipped terms at and beyond their thresholds, on both kinds of arrays."""
     for xp_array in (np.asarray, lambda values: torch.as_tensor(np.asarray(values, dtype=np.float64))):

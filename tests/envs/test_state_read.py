@@ -10,7 +10,7 @@ import pytest
 
 from margin_rl.envs.config import EnvConfig, RandomizationConfig
 from margin_rl.envs.core import AnymalCore
-from margin_rl.envs.episode_state import EPISODE_STATE, episode_columns, episode_views
+from margin_rl.envs.episode_state import EPISODE_SPANS, EPISODE_STATE, episode_columns, episode_views
 from margin_rl.envs.state_read import _field_split
 from margin_rl.robot import mjcf_names as names
 
@@ -99,3 +99,14 @@ def test_a_resets_episode_columns_are_its_values_in_place_and_zeros_elsewhere() 
     for name in EPISODE_STATE:
         expected = start[name][:, 0] if name == "mu" else start.get(name, 0.0)
         np.testing.assert_array_equal(views[name], expected, err_msg=name)
+
+
+def test_each_span_of_the_episode_state_is_its_quantities_side_by_side_in_one_view() -> None:
+    floats = np.arange(4 * sum(EPISODE_STATE.values()), dtype=np.float64).reshape(4, -1)
+    views = episode_views(floats, np.zeros((4, 2), dtype=np.int64))
+    order = list(EPISODE_STATE)
+    for span, (first, last) in EPISODE_SPANS.items():
+        quantities = order[order.index(first) : order.index(last) + 1]
+        side_by_side = np.concatenate([views[name].reshape(4, -1) for name in quantities], axis=1)
+        np.testing.assert_array_equal(views[span], side_by_side, err_msg=span)
+        assert np.shares_memory(views[span], floats), span

@@ -128,3 +128,25 @@ def test_the_recorded_graphs_replay_what_eager_launches() -> None:
         torch.testing.assert_close(got.reward, expected.reward, rtol=0, atol=0)
     for name in ("qpos", "qvel", "time", "sensordata"):
         torch.testing.assert_close(getattr(replayed.physics, name), getattr(eager.physics, name), rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("terrain", ["flat", "rough"])
+def test_the_critic_of_a_device_step_sees_the_state_after_its_resets(terrain: str) -> None:
+    """A device step looks the scan's and the critic's ground up in one lookup after its masked reset, from that
+    reset's read: its critic observation equals the one read afresh after the step, bit for bit, on steps where
+    episodes end (mujoco.batch stepping as a device does)."""
+    config = EnvConfig(
+        robot="anymal_c", terrain=terrain, height_scan=True, privileged_observations=True, episode_length_s=0.1
+    )
+    core = AnymalCore(config, 4, seed=3)
+    core.sync_free = True
+    core.reset(seed=3)
+    ended = 0
+    for a in np.random.default_rng(3).uniform(-1, 1, (12, 4, 12)):
+        out = core.step(a)
+        np.testing.assert_array_equal(out.privileged, core.privileged_observation())
+        np.testing.assert_array_equal(
+            out.observation[out.truncated | out.terminated], core.observe_all()[out.truncated | out.terminated]
+        )
+        ended += int(np.sum(out.truncated | out.terminated))
+    assert ended > 0

@@ -48,8 +48,8 @@ class GroundQueries:
                 groups["normals"] = ((4, 4), lambda: terrain.normal_stencil(feet_xy))
             groups["soles"] = ((4, 9), lambda: spread_stencil(feet_xy, self.foot_radius))
         if config.height_scan:
-            groups["scan"] = ((self.scan_offsets.shape[0],), lambda: self.scan_points(state))
-        return self.lookup(groups, int(state.base_pos.shape[0]), state.base_pos)
+            groups["scan"] = self._scan_group(state)
+        return self.lookup(groups, state.base_pos)
 
     def reset_heights(self, state: SimulationState, config: EnvConfig, foot_offsets: Any) -> dict[str, Any]:
         """The ground heights [m] a reset's first observations look up, in one lookup: the height scan's points
@@ -57,19 +57,19 @@ class GroundQueries:
         ("around_feet", (N, 4, K): with privileged observations; :meth:`heights_around`)."""
         groups = {}
         if config.height_scan:
-            groups["scan"] = ((self.scan_offsets.shape[0],), lambda: self.scan_points(state))
+            groups["scan"] = self._scan_group(state)
         if config.privileged_observations:
             shape = (4, int(foot_offsets.shape[0]))
             groups["around_feet"] = (shape, lambda: around_points(state.feet, foot_offsets))
-        return self.lookup(groups, int(state.base_pos.shape[0]), state.base_pos)
+        return self.lookup(groups, state.base_pos)
 
-    def lookup(self, groups: dict[str, tuple[tuple[int, ...], Any]], n: int, reference: Any) -> dict[str, Any]:
+    def lookup(self, groups: dict[str, tuple[tuple[int, ...], Any]], reference: Any) -> dict[str, Any]:
         """The ground heights [m] under named groups of points, looked up at once: ``groups``: name -> (shape,
         a function returning its points (n, *shape, 2), called only on rough ground); returns name -> (n, *shape).
-        ``reference``: an array of the core's kind and device (flat ground's zeros)."""
+        ``reference``: an (n, ...) array of the core's kind and device (flat ground's zeros)."""
         if not groups:
             return {}
-        xp = namespace(reference)
+        xp, n = namespace(reference), int(reference.shape[0])
         shapes = {name: shape for name, (shape, _) in groups.items()}
         sizes = [math.prod(shape) for shape in shapes.values()]
         if self.terrain.is_flat:  # the ground is at 0 everywhere: nothing to look up
@@ -81,6 +81,10 @@ class GroundQueries:
         return {
             name: xp.reshape(piece, (n, *shape)) for (name, shape), piece in zip(shapes.items(), pieces, strict=True)
         }
+
+    def _scan_group(self, state: SimulationState) -> tuple[tuple[int, ...], Any]:
+        """The height scan's points as a group of :meth:`lookup`: ((P,), a function returning them)."""
+        return (int(self.scan_offsets.shape[0]),), lambda: self.scan_points(state)
 
     def scan_points(self, state: SimulationState) -> Any:
         """(N, P, 2) the height scan's points (around the base, turned with its yaw) [m]."""

@@ -19,7 +19,8 @@ INDEXING = frozenset({"index", "index_put", "index_put_"})
 RANDOM = frozenset({"rand", "randint", "randn", "exponential", "exponential_", "uniform_", "normal_", "random_"})
 
 
-SOURCES = tuple(str(Path(__file__).resolve().parents[2] / folder) for folder in ("envs", "margin_rl"))
+ROOT = Path(__file__).resolve().parents[2]
+SOURCES = tuple(str(ROOT / folder) for folder in ("envs", "margin_rl"))
 """The package's source folders, whose lines :class:`DispatchCounter` attributes operations to (``by_source``)."""
 
 
@@ -66,7 +67,6 @@ def _source_line() -> str:
     while frame is not None:
         path = frame.f_code.co_filename
         if path.startswith(SOURCES) and not path.endswith("arrays.py"):
-            root = str(Path(SOURCES[0]).parent) + "/"
-            return f"{path.removeprefix(root)}:{frame.f_lineno}"
+            return f"{Path(path).relative_to(ROOT)}:{frame.f_lineno}"
         frame = frame.f_back
     return "elsewhere"

@@ -44,7 +44,17 @@ import mujoco
 import numpy as np
 from array_api_compat import device as device_of
 
-from margin_rl.arrays import Array, finite_mask, like, namespace, random_generator, rotate, write_where
+from margin_rl.arrays import (
+    ALL_ROWS,
+    Array,
+    finite_mask,
+    like,
+    namespace,
+    random_generator,
+    rotate,
+    rows_of,
+    write_where,
+)
 from margin_rl.envs.backends import PHYSICS_BACKENDS, PhysicsChoice, make_physics
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.episode_state import EPISODE_COUNTERS, EPISODE_STATE, episode_columns, episode_views
@@ -207,11 +217,11 @@ class AnymalCore:
         self.dt = float(physics.timestep * config.decimation)
         self.max_episode_steps = round(config.episode_length_s / self.dt)
         self._base = physics.body_id(names.BASE_BODY)
+        self._base_wrench = physics.xfrc_applied[:, self._base]  # (N, 6) the pushes' row of the live array, a view
         self._reader = StateReader(physics, self.robot)
         self._key, key_qpos, key_ctrl = physics.keyframe(names.STANDING_KEYFRAME)
         self._key_qpos, self._key_ctrl = self._array(key_qpos), self._array(key_ctrl)
         self._standing_start = StandingStart.of(self._key_qpos, physics.nv)  # what a reset starts from
-        self._key_ctrl_physics = self._cast(self._key_ctrl, physics.ctrl)  # in the physics' own dtype, once
         self._standing_joint_pos = self._array(self.robot.standing_joint_pos)
         # |tau| within this share of the MJCF forcerange counts as at the limit (MuJoCo clips to it exactly; Warp's
         # float32 rounds within ~1e-7 of it)
@@ -221,7 +231,7 @@ class AnymalCore:
         # physics' dtype, so that one comparison of the joined state checks both (_invalid_state)
         nq, nv, largest = physics.qpos.shape[1], physics.qvel.shape[1], self.xp.finfo(physics.qpos.dtype).max
         self._valid_state_bound = self._cast(self._array([largest] * nq + [DIVERGED_SPEED] * nv), physics.qpos)
-        self._friction = physics.per_env_field("geom_friction")
+        self._floor_friction = physics.per_env_field("geom_friction")[:, self._floor, 0]  # (N,) a view, made once
         self._allocate_state()
         self._margin_fn = make_margin_function(config.margin, self.robot, config.margin_weights, MARGIN_CLIP[0])
         self._policy_terms = policy_observations(config.height_scan)
@@ -341,23 +351,22 @@ class AnymalCore:
         spawn_points = self.terrain.spawn_points_like(self._key_qpos)
         if self.terrain.levels:  # a tile of the environment's level, at random along its row
             columns = spawn_points.shape[0] // self.terrain.levels
-            tile = self.terrain_level[rows.select] * columns + self._index(rng.integers(0, columns, size=n))
+            tile = rows.of(self.terrain_level) * columns + self._index(rng.integers(0, columns, size=n))
             spawn = spawn_points[tile]
         else:
             spawn = spawn_points[rng.integers(0, spawn_points.shape[0], size=n)]
         draws = draw_reset(rng, n, cfg)
         qpos, qvel = self._standing_start.state(spawn, draws, cfg)
+        # the backend's reset gave the rows the keyframe's controls and no applied force (its contract)
         rows.write(physics.qpos, self._cast(qpos, physics.qpos))
         rows.write(physics.qvel, self._cast(qvel, physics.qvel))
-        rows.write(physics.ctrl, self._key_ctrl_physics)
-        rows.write(physics.xfrc_applied, 0.0)
-        mu = self.mu[rows.select]
+        mu = rows.of(self.mu)
         if draws.friction is not None:
             mu = draws.friction
-            rows.write(self._friction[:, self._floor, 0], self._cast(mu, self._friction))
+            rows.write(self._floor_friction, self._cast(mu, self._floor_friction))
         physics.forward(rows.forward_rows)
         state = self._read(rows.select)
-        next_push = self._next_push[rows.select]
+        next_push = rows.of(self._next_push)
         if rnd.push_interval_s is not None:
             next_push = rng.exponential(rnd.push_interval_s / self.dt, size=n)
         start = {  # the episode's first values, in EPISODE_STATE's columns (the rest 0)
@@ -392,19 +401,17 @@ class AnymalCore:
         """The terrain curriculum's step at the end of the episodes of ``rows`` (:func:`~margin_rl.envs.terrain.
         next_levels`), before they are reset; environments that have not stepped since their last reset keep
         their level."""
-        xp, levels, ids = self.xp, self.terrain.levels, rows.select
-        ran = self.episode_step[ids] > 0
-        where = self._float(self.physics.qpos[ids][:, names.BASE_POSITION_QPOS][:, :2])
-        walked = xp.linalg.vector_norm(where - self._spawn_xy[ids], axis=1)
-        commanded = xp.linalg.vector_norm(self.command[ids, :2], axis=1) * self.episode_step[ids] * self.dt
+        xp, levels, level = self.xp, self.terrain.levels, rows.of(self.terrain_level)
+        episode_step = rows.of(self.episode_step)
+        where = self._float(rows.of(self.physics.qpos)[:, names.BASE_POSITION_QPOS][:, :2])
+        walked = xp.linalg.vector_norm(where - rows.of(self._spawn_xy), axis=1)
+        commanded = xp.linalg.vector_norm(rows.of(self.command)[:, :2], axis=1) * episode_step * self.dt
         random_level = self._index(self.rng.integers(0, levels, size=rows.count))
-        moved = next_levels(
-            self.terrain_level[ids], walked, commanded, self.config.terrain_config.tile, levels - 1, random_level
-        )
-        rows.write(self.terrain_level, xp.where(ran, moved, self.terrain_level[ids]))
+        moved = next_levels(level, walked, commanded, self.config.terrain_config.tile, levels - 1, random_level)
+        rows.write(self.terrain_level, xp.where(episode_step > 0, moved, level))
 
     # ------------------------------------------------------------------ state
-    def _read(self, ids: Any = slice(None), finite: bool = False) -> SimulationState:
+    def _read(self, ids: Any = ALL_ROWS, finite: bool = False) -> SimulationState:
         """World-frame state of environments ``ids`` from the physics' live arrays (float64; :mod:`.state_read`)."""
         return self._reader.read(ids, finite)
 
@@ -443,7 +450,7 @@ class AnymalCore:
         edge_touchdown = self._ground.edge_touchdowns(touchdown, ground)
         base_height = state.base_pos[:, 2] - ground["base"]
         values = {
-            **self._policy_values(state, slice(None), ground.get("scan")),
+            **self._policy_values(state, ALL_ROWS, ground.get("scan")),
             "margin": margin,
             "torques": self.xp.astype(self.physics.actuator_force, self.xp.float64),  # a copy
             "action": action,
@@ -481,7 +488,7 @@ class AnymalCore:
         if masked_reset:  # every row reset where done, observed again where done
             after_reset = self._reset_rows(ResetRows.where(done))
             ground = self._ground.reset_heights(after_reset, cfg, self._foot_offsets)  # the scan's and the critic's
-            first = self._observe_state(after_reset, slice(None), ground.get("scan"))
+            first = self._observe_state(after_reset, ALL_ROWS, ground.get("scan"))
             observation = self.xp.where(done[:, None], first, observation)
             if "around_feet" in ground:  # the critic's: every row's state now is the read after the reset
                 privileged = self._privileged(after_reset.feet, ground["around_feet"])
@@ -523,22 +530,15 @@ class AnymalCore:
         return ~xp.all(xp.abs(state) <= self._valid_state_bound, axis=1)
 
     def _simulate(self) -> Array:
-        """Step the physics ``decimation`` times; returns the (N,) divergence flags.
-
-        A state that was already invalid before the step (e.g. written by a user) is flagged too. MuJoCo resets
-        a simulation whose accelerations blow up (a "bad QACC" warning) instead of raising; its clock then fails
-        to advance by the step, which is how such a divergence is caught here.
-        """
-        physics, xp = self.physics, self.xp
+        """Step the physics ``decimation`` times; returns the (N,) divergence flags: the simulations the backend
+        reports failed (MuJoCo: an error, or a reset after its accelerations blew up; Warp reports none, its state
+        turns non-finite instead), and every state not valid before or after the step (e.g. written by a user)."""
         diverged = self._invalid_state()
-        time_before = xp.astype(physics.time, xp.float64)  # a copy
-        failed = physics.step(self.config.decimation)
+        failed = self.physics.step(self.config.decimation)
         if not self.sync_free:  # on a device with the step's other checks (raise_pending_errors)
             self.physics.check_overflow()  # dropped contacts would make every later step of a world wrong
-        if failed.shape[0]:  # a simulation failed: end its episode, keep the others (Warp reports none)
+        if failed.shape[0]:  # a simulation failed: end its episode, keep the others
             diverged[failed] = True
-        expected = time_before + self.config.decimation * physics.timestep
-        diverged |= xp.abs(self._float(physics.time) - expected) > 0.5 * physics.timestep
         return diverged | self._invalid_state()
 
     def raise_pending_errors(self) -> None:
@@ -643,7 +643,7 @@ class AnymalCore:
         active = self._push_steps_left > 0
         # The force of this step, kept for lambda: the counter below already reads 0 during a push's last step.
         self._push_applied[...] = self.xp.where(active[:, None], self._push_force, 0.0)
-        self.physics.xfrc_applied[:, self._base, :] = self._push_wrench  # the force, and no torque
+        self._base_wrench[...] = self._push_wrench  # the force, and no torque
         self._push_steps_left[...] = self.xp.clip(self._push_steps_left - 1, min=0)
 
     # ------------------------------------------------------------------ observations
@@ -653,14 +653,14 @@ class AnymalCore:
 
     def _observe_state(self, state: SimulationState, ids: Any, scan_heights: Any = None) -> Any:
         """Policy observations of environments ``ids`` in ``state`` (read), ``scan_heights`` as in _policy_values."""
-        values = {**self._policy_values(state, ids, scan_heights), "last_action": self.last_action[ids]}
+        values = {**self._policy_values(state, ids, scan_heights), "last_action": rows_of(self.last_action, ids)}
         noise = self.config.randomization.observation_noise
         return assemble(values, self._policy_terms, noise, self.rng)
 
     def _policy_values(self, state: SimulationState, ids: Any, scan_heights: Any = None) -> dict[str, Any]:
         """The robot-state terms of the observation (and the rewards), from a state read of ``ids``;
         ``scan_heights``: the ground under the scan's points where the step looked them up already."""
-        values = robot_state_terms(state, self.command[ids], self._standing_joint_pos)
+        values = robot_state_terms(state, rows_of(self.command, ids), self._standing_joint_pos)
         if self.config.height_scan:
             values["height_scan"] = self._ground.height_scan(state, scan_heights)
         return values

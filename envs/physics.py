@@ -46,8 +46,9 @@ class PhysicsBackend(Protocol):
     Live arrays, ``(num_envs, ...)`` (numpy arrays on the host, or torch tensors on the backend's device; writes
     take effect at the next call, outputs refreshed by every call): ``qpos``, ``qvel``, ``ctrl``, ``xfrc_applied``
     (``(num_envs, nbody, 6)``), ``time``; ``sensordata``, ``site_xpos``, ``xpos``, ``actuator_force``. Model
-    constants are read by name from ``model`` (the MjModel the backend was built from). Both backends are checked
-    against this protocol by the tests, member by member.
+    constants are read by name from ``model`` (the MjModel the backend was built from). ``reset(ids, keyframe)``
+    gives the worlds ``ids`` the keyframe's state, controls and clock and clears their applied forces (the core then
+    writes only qpos and qvel). Both backends are checked against this protocol by the tests, member by member.
     """
 
     model: mujoco.MjModel
@@ -200,13 +201,18 @@ class MujocoBatchPhysics(ModelConstants):
 
     def step(self, nstep: int) -> np.ndarray:
         """Advance every simulation by ``nstep`` physics steps, then compute the derived quantities of the new
-        state (``mj_forward``); returns the ids of the simulations MuJoCo raised an error in (they keep the
-        state they had before the call, the others ran)."""
+        state (``mj_forward``); returns the ids of the simulations that failed: MuJoCo raised an error in them (they
+        keep the state they had before the call, the others ran), or it reset them when their accelerations blew up
+        (a "bad QACC" warning, no error), which shows as a clock that did not advance by the ``nstep`` steps (not
+        where the blow-up comes in the first step from clock 0: the reset puts the clock back where it was)."""
+        expected = self.time + nstep * self.timestep  # a new array: the clocks the steps should reach
+        raised = np.zeros(0, dtype=np.int64)
         try:
             self.batch.step(nstep=nstep, stage=mujoco.mjtStage.mjSTAGE_ACC)
         except mj_batch.SimulationError as exc:
-            return np.asarray(exc.ids, dtype=np.int64)
-        return np.zeros(0, dtype=np.int64)
+            raised = np.asarray(exc.ids, dtype=np.int64)
+        stalled = np.flatnonzero(np.abs(self.time - expected) > 0.5 * self.timestep)
+        return np.union1d(raised, stalled)
 
     def check_overflow(self) -> None:
         """Nothing to check: MuJoCo grows its contact and constraint arena as needed (a full arena raises in

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from margin_rl.arrays import write_where
+from margin_rl.arrays import ALL_ROWS, rows_of, write_where
 
 
 @dataclass(frozen=True)
@@ -14,7 +14,7 @@ class ResetRows:
     resets, and any reset asked for), or a mask (every row computed, written in place where the mask holds: a
     device step's autoreset, with no host read and the same work and random draws every step)."""
 
-    select: Any  # what reads the rows: the ids, or slice(None)
+    select: Any  # what reads the rows: the ids, or ALL_ROWS
     count: int  # rows computed (and random draws per quantity)
     mask: Any = None  # (N,) bool where written; None: the ids
     mask_rows: Any = None  # the mask as (N, 1), over the rows of a 2-D array (a view, made once per reset)
@@ -25,7 +25,7 @@ class ResetRows:
 
     @classmethod
     def where(cls, mask: Any) -> ResetRows:
-        return cls(slice(None), int(mask.shape[0]), mask, mask[:, None])
+        return cls(ALL_ROWS, int(mask.shape[0]), mask, mask[:, None])
 
     @property
     def physics_rows(self) -> Any:
@@ -36,6 +36,10 @@ class ResetRows:
     def forward_rows(self) -> Any:
         """What the physics' forward pass takes: the ids, or None (every simulation)."""
         return self.select if self.mask is None else None
+
+    def of(self, array: Any) -> Any:
+        """The rows of ``array`` the reset computes: ``array[ids]``, or by mask the whole array itself."""
+        return rows_of(array, self.select)
 
     def write(self, target: Any, values: Any) -> None:
         """``target[rows] = values``, in place (``values``: ``count`` rows, or a scalar)."""

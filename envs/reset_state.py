@@ -64,7 +64,7 @@ def draw_reset(rng: Any, n: int, config: EnvConfig) -> ResetDraws:
     rnd, c = config.randomization, config.command
     friction = () if rnd.friction is None else ((*rnd.friction, None),)
     velocities = (c.forward_velocity, c.lateral_velocity, c.yaw_rate)
-    bounds = ((-1, 1, 12), (-1, 1, 6), *friction, *((*velocity, None) for velocity in velocities))
-    joint_noise, velocity_noise, *drawn = uniform_columns(rng, n, bounds)
-    mu = drawn.pop(0) if friction else None
-    return ResetDraws(joint_noise, velocity_noise, mu, namespace(*drawn).stack(drawn, axis=1))
+    commands = (tuple(low for low, _ in velocities), tuple(high for _, high in velocities), 3)  # a column each
+    joint_noise, velocity_noise, *drawn = uniform_columns(rng, n, ((-1, 1, 12), (-1, 1, 6), *friction, commands))
+    mu = drawn[0] if friction else None
+    return ResetDraws(joint_noise, velocity_noise, mu, drawn[-1])

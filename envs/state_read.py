@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from margin_rl.arrays import finite_or_zero, like, namespace, rotate, split_columns
+from margin_rl.arrays import ALL_ROWS, finite_or_zero, like, namespace, rotate, rows_of, split_columns
 from margin_rl.envs.physics import PhysicsBackend
 from margin_rl.envs.step_data import SimulationState
 from margin_rl.robot import Robot, quat_wxyz_to_matrix
@@ -61,25 +61,20 @@ class StateReader:
         found.append(physics.sensor_adr(names.BASE_CONTACT_SENSOR))
         self._contact_columns = index([sensors + adr for adr in found])
 
-    def read(self, ids: Any = slice(None), finite: bool = False) -> SimulationState:
-        """World-frame state of environments ``ids`` (an index array, or ``slice(None)`` for all).
+    def read(self, ids: Any = ALL_ROWS, finite: bool = False) -> SimulationState:
+        """World-frame state of environments ``ids`` (an index array, or ``ALL_ROWS``).
 
         ``finite``: every non-finite float of the state replaced by 0 (a diverged step's bookkeeping), the derived
         ones (orientation, world-frame angular velocity) computed from the raw values first, as for any state.
         """
         physics = self.physics
         xp = namespace(physics.qpos)
-        every = isinstance(ids, slice) and ids == slice(None)
-
-        def rows(array: Any) -> Any:
-            return array if every else array[ids]
-
-        feet, knees = rows(physics.site_xpos)[:, self.feet_sites], rows(physics.xpos)[:, self._knees]
+        feet, knees = rows_of(physics.site_xpos, ids)[:, self.feet_sites], rows_of(physics.xpos, ids)[:, self._knees]
         n = int(feet.shape[0])
         sources = (
-            rows(physics.qpos),
-            rows(physics.qvel),
-            rows(physics.sensordata),
+            rows_of(physics.qpos, ids),
+            rows_of(physics.qvel, ids),
+            rows_of(physics.sensordata, ids),
             xp.reshape(feet, (n, 12)),
             xp.reshape(knees, (n, 12)),
         )

@@ -91,6 +91,18 @@ def unstack(values: Any, axis: int = 1) -> tuple[Any, ...]:
     return values.unbind(axis)
 
 
+ALL_ROWS = slice(None)
+"""The rows argument that means every row (:func:`rows_of`)."""
+
+
+def rows_of(values: Any, rows: Any) -> Any:
+    """``values[rows]`` for ``rows`` an index array, or ``values`` itself for :data:`ALL_ROWS` (a view of every row
+    would be one more operation dispatched on a device, for nothing)."""
+    if isinstance(rows, slice) and rows == ALL_ROWS:
+        return values
+    return values[rows]
+
+
 def take_last(values: Any, index: Any) -> Any:
     """``values[..., index]`` for an integer ``index`` (k,) of ``values``' kind, as a new C-ordered array: numpy's
     ``take``, torch's ``index_select`` (one operation; the standard's ``take`` dispatches four on torch)."""
@@ -181,25 +193,21 @@ class TorchRandom:
         draws = torch.rand(self._shape(size), generator=self.generator, dtype=torch.float64, device=self.device)
         return low + (high - low) * draws
 
-    def uniform_columns(self, n: int, bounds: tuple[tuple[float, float, int | None], ...]) -> list[Any]:
+    def uniform_columns(self, n: int, bounds: tuple[ColumnBounds, ...]) -> list[Any]:
         """:func:`uniform_columns` on this generator: one (n, columns) draw, scaled per column, split."""
         import torch
 
         if bounds not in self._column_bounds:  # per column: low, and high - low (made once per set of bounds)
-            widths = [1 if width is None else width for _, _, width in bounds]
-            lows = np.repeat([float(low) for low, _, _ in bounds], widths)
-            ranges = np.repeat([float(high) - float(low) for low, high, _ in bounds], widths)
+            widths, low, high = _column_bounds(bounds)
             self._column_bounds[bounds] = (
                 widths,
-                torch.as_tensor(lows, device=self.device),
-                torch.as_tensor(ranges, device=self.device),
+                torch.as_tensor(low, device=self.device),
+                torch.as_tensor(high - low, device=self.device),
             )
         widths, lows, ranges = self._column_bounds[bounds]
         draws = torch.rand((n, sum(widths)), generator=self.generator, dtype=torch.float64, device=self.device)
         pieces = split_columns(lows + ranges * draws, widths)
-        return [
-            piece if width is not None else piece[:, 0] for piece, (_, _, width) in zip(pieces, bounds, strict=True)
-        ]
+        return [piece if entry[2] is not None else piece[:, 0] for piece, entry in zip(pieces, bounds, strict=True)]
 
     def integers(self, low: int, high: int, size: Any = 1) -> Any:
         """Integers in [low, high) of shape ``size``."""
@@ -232,13 +240,54 @@ class TorchRandom:
         self.state = saved["state"]
 
 
-def uniform_columns(rng: Any, n: int, bounds: tuple[tuple[float, float, int | None], ...]) -> list[Any]:
-    """Uniform draws for ``n`` environments, one array per ``(low, high, width)`` of ``bounds``: U[low, high) of
-    shape (n, width), or (n,) where width is None. numpy's generator draws them one call after another, as
-    ``rng.uniform(low, high, size)`` would (its stream unchanged); a :class:`TorchRandom` draws them all at once,
-    one (n, columns) array scaled per column (three operations on a device, not three per array)."""
+ColumnBounds = tuple[Any, Any, "int | None"]
+"""One array of :func:`uniform_columns`: ``(low, high, width)``, floats (U[low, high) of shape (n, width), or (n,)
+where width is None) or tuples of ``width`` floats (per column: an (n, width) array whose column j is U[low[j],
+high[j]))."""
+
+
+def _bounds_width(entry: ColumnBounds) -> int:
+    """Columns one :data:`ColumnBounds` entry draws.
+
+    Raises:
+        ValueError: per-column bounds whose lengths differ from each other or from the width.
+    """
+    low, high, width = entry
+    per_column = isinstance(low, tuple) or isinstance(high, tuple)
+    if per_column and not (isinstance(low, tuple) and isinstance(high, tuple) and len(low) == len(high) == width):
+        raise ValueError(f"per-column bounds need a low and a high of {width} entries each, got {low} and {high}")
+    return 1 if width is None else int(width)
+
+
+def _column_bounds(bounds: tuple[ColumnBounds, ...]) -> tuple[list[int], np.ndarray, np.ndarray]:
+    """The widths of the arrays ``bounds`` describes, and every column's low and high (float64, in order)."""
+    widths = [_bounds_width(entry) for entry in bounds]
+    table = np.concatenate(  # (columns, 2): a row (low, high) per column
+        [
+            np.broadcast_to(np.asarray(entry[:2], dtype=np.float64).T, (width, 2))
+            for entry, width in zip(bounds, widths, strict=True)
+        ]
+    )
+    return widths, table[:, 0], table[:, 1]
+
+
+def _numpy_uniform(rng: np.random.Generator, n: int, low: Any, high: Any, width: int | None) -> np.ndarray:
+    """One array of :func:`uniform_columns` from numpy's generator; per-column bounds one (n,) call per column."""
+    if isinstance(low, tuple):
+        return np.stack([rng.uniform(lo, hi, size=n) for lo, hi in zip(low, high, strict=True)], axis=1)
+    return rng.uniform(low, high, size=n if width is None else (n, width))
+
+
+def uniform_columns(rng: Any, n: int, bounds: tuple[ColumnBounds, ...]) -> list[Any]:
+    """Uniform draws for ``n`` environments, one array per ``(low, high, width)`` of ``bounds``
+    (:data:`ColumnBounds`). numpy's generator draws them one call after another, as ``rng.uniform(low, high, size)``
+    would (per-column bounds: one (n,) call per column, stacked), so its stream is unchanged; a :class:`TorchRandom`
+    draws them all at once, one (n, columns) array scaled per column (three operations on a device, not three per
+    array)."""
+    for entry in bounds:
+        _bounds_width(entry)
     if isinstance(rng, np.random.Generator):
-        return [rng.uniform(low, high, size=n if width is None else (n, width)) for low, high, width in bounds]
+        return [_numpy_uniform(rng, n, *entry) for entry in bounds]
     return rng.uniform_columns(n, bounds)
 
 

@@ -206,11 +206,16 @@ def test_write_where_writes_the_masked_rows_in_place(n: int, width: int, seed: i
 @settings(max_examples=20, deadline=None)
 @given(st.integers(1, 50), st.integers(0, 2**32 - 1), st.booleans())
 def test_uniform_columns_keep_numpys_stream_and_draw_once_on_torch(n: int, seed: int, friction: bool) -> None:
-    """numpy: the arrays one rng.uniform call after another would give, bit for bit (a reset's stream unchanged);
-    torch: one draw for all of them, each array within its bounds and of its shape."""
-    bounds = ((-1, 1, 12), (-1, 1, 6), *(((0.4, 1.2, None),) if friction else ()), (-0.5, 1.5, None), (0, 0, None))
+    """numpy: the arrays one rng.uniform call after another would give, bit for bit (a reset's stream unchanged; a
+    per-column block as one (n,) call per column, stacked); torch: one draw for all of them, each array within its
+    bounds (per column for a block) and of its shape."""
+    commands = ((-0.5, 0.0, -1.0), (1.5, 0.0, 1.0), 3)  # a column each, the middle one constant
+    bounds = ((-1, 1, 12), (-1, 1, 6), *(((0.4, 1.2, None),) if friction else ()), (-0.5, 1.5, None), commands)
     expected_rng, rng = np.random.default_rng(seed), np.random.default_rng(seed)
-    expected = [expected_rng.uniform(lo, hi, size=n if w is None else (n, w)) for lo, hi, w in bounds]
+    expected = [expected_rng.uniform(lo, hi, size=n if w is None else (n, w)) for lo, hi, w in bounds[:-1]]
+    expected.append(
+        np.stack([expected_rng.uniform(lo, hi, size=n) for lo, hi in zip(*commands[:2], strict=True)], axis=1)
+    )
     drawn = uniform_columns(rng, n, bounds)
     assert [a.tobytes() for a in drawn] == [a.tobytes() for a in expected]
     assert rng.uniform() == expected_rng.uniform()  # the same count drawn
@@ -218,9 +223,21 @@ def test_uniform_columns_keep_numpys_stream_and_draw_once_on_torch(n: int, seed:
     counter = DispatchCounter()
     with counter:
         on_torch = uniform_columns(torch_rng, n, bounds)
-    assert counter.random_numbers == n * (18 + len(bounds) - 2)
-    for array, (lo, hi, w) in zip(on_torch, bounds, strict=True):
+    assert counter.random_numbers == n * sum(1 if w is None else w for _, _, w in bounds)
+    lows = [np.full(w or 1, lo) for lo, _, w in bounds[:-1]] + [np.array(commands[0])]
+    highs = [np.full(w or 1, hi) for _, hi, w in bounds[:-1]] + [np.array(commands[1])]
+    for array, (_, _, w), lo, hi in zip(on_torch, bounds, lows, highs, strict=True):
         assert tuple(array.shape) == ((n,) if w is None else (n, w)) and array.dtype == torch.float64
-        assert float(array.min()) >= lo and (float(array.max()) < hi or lo == hi)
+        values = array.numpy().reshape(n, -1)
+        assert (values >= lo).all() and ((values < hi) | (lo == hi)).all()
+    assert (on_torch[-1][:, 1] == 0.0).all()
     again = uniform_columns(TorchRandom(seed, "cpu"), n, bounds)
     assert all(torch.equal(a, b) for a, b in zip(on_torch, again, strict=True))
+
+
+@pytest.mark.parametrize("bounds", [((0.0, 1.0), (1.0, 2.0), 3), ((0.0, 1.0), 2.0, 2), ((0.0, 1.0), (1.0, 2.0), None)])
+def test_uniform_columns_refuse_per_column_bounds_of_another_width(bounds: tuple) -> None:
+    """Per-column bounds whose lengths do not match each other and the width: a ValueError, on numpy and torch."""
+    for rng in (np.random.default_rng(0), TorchRandom(0, "cpu")):
+        with pytest.raises(ValueError, match="per-column bounds"):
+            uniform_columns(rng, 4, (bounds,))

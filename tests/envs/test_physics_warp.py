@@ -128,6 +128,26 @@ def _steps_from_the_same_state(terrain: str, steps: int, seed: int):
         yield reference, warp, expected, got.to_numpy()
 
 
+def test_a_reset_restores_the_keyframes_controls_and_clears_the_applied_forces() -> None:
+    """What the core leaves to the backends' reset (it writes only qpos and qvel after one): the reset worlds' ctrl is
+    the keyframe's, their applied forces 0 and their clock the keyframe's, by ids and by mask; the other worlds keep
+    theirs."""
+    reference, warp = _pair("flat")
+    for backend in (reference.physics, warp.physics):
+        key = backend.model.key(reference._key)
+        for rows in (np.array([1, 4]), np.isin(np.arange(N), [1, 4])):
+            backend.ctrl[:] = like(np.full((N, backend.model.nu), 0.25), backend.ctrl)
+            backend.xfrc_applied[:] = 7.0
+            backend.time[:] = 3.0
+            backend.reset(rows if isinstance(backend, MujocoBatchPhysics) else like(rows, backend.qpos), reference._key)
+            reset = np.isin(np.arange(N), [1, 4])
+            ctrl, xfrc, time = (to_numpy(a) for a in (backend.ctrl, backend.xfrc_applied, backend.time))
+            np.testing.assert_allclose(ctrl[reset], np.broadcast_to(key.ctrl, (2, backend.model.nu)), rtol=1e-6)
+            assert (ctrl[~reset] == 0.25).all()
+            assert (xfrc[reset] == 0.0).all() and (xfrc[~reset] == 7.0).all()
+            assert (time[reset] == key.time[0]).all() and (time[~reset] == 3.0).all()
+
+
 def test_one_decimated_step_at_a_time_matches_mujoco_on_flat_ground() -> None:
     """Every step's physics, lambda, margin, rewards, observations and terminations within :data:`FLAT`."""
     pushed = 0

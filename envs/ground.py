@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from margin_rl.arrays import namespace, rotate, split_columns
+from margin_rl.arrays import namespace, reshaped, rotate, split_columns
 from margin_rl.envs.config import EnvConfig
 from margin_rl.envs.observations import HEIGHT_SCAN_CLIP
 from margin_rl.envs.step_data import SimulationState
@@ -75,10 +75,12 @@ class GroundQueries:
         if self.terrain.is_flat:  # the ground is at 0 everywhere: nothing to look up
             heights = xp.zeros((n, sum(sizes)), dtype=xp.float64, device=reference.device)
         else:
-            points = [_shaped(points(), (n, size, 2)) for (_, points), size in zip(groups.values(), sizes, strict=True)]
+            points = [
+                reshaped(points(), (n, size, 2)) for (_, points), size in zip(groups.values(), sizes, strict=True)
+            ]
             heights = self.terrain.height(xp.concat(points, axis=1))
         pieces = split_columns(heights, sizes) if len(sizes) > 1 else (heights,)
-        return {name: _shaped(piece, (n, *shape)) for (name, shape), piece in zip(shapes.items(), pieces, strict=True)}
+        return {name: reshaped(piece, (n, *shape)) for (name, shape), piece in zip(shapes.items(), pieces, strict=True)}
 
     def _scan_group(self, state: SimulationState) -> tuple[tuple[int, ...], Any]:
         """The height scan's points as a group of :meth:`lookup`: ((P,), a function returning them)."""
@@ -120,12 +122,6 @@ class GroundQueries:
         if "soles" not in ground:
             return namespace(touchdown).zeros_like(touchdown)
         return touchdown & (spread_of_heights(ground["soles"]) > STEP_EDGE_RISE)
-
-
-def _shaped(array: Any, shape: tuple[int, ...]) -> Any:
-    """``array`` reshaped to ``shape``, itself where it has that shape already (on a device a reshape is an operation
-    dispatched from Python, even when it changes nothing)."""
-    return array if tuple(array.shape) == shape else namespace(array).reshape(array, shape)
 
 
 def around_points(points: Any, offsets: Any) -> Any:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from margin_rl.arrays import constant, namespace, rotate
+from margin_rl.arrays import constant, namespace, reshaped, rotate
 
 if TYPE_CHECKING:
     from margin_rl.envs.step_data import SimulationState
@@ -104,8 +104,7 @@ def assemble(values: dict[str, Any], terms: tuple[ObservationTerm, ...], noise_l
     parts = []
     for t in terms:
         v = xp.astype(xp.asarray(values[t.name]), xp.float64, copy=False)
-        if tuple(v.shape[1:]) != (t.size,):  # (N, ...) flattened per environment; (N, size) already is
-            v = xp.reshape(v, (-1, t.size))
+        v = reshaped(v, (int(v.shape[0]), t.size))  # (N, ...) flattened per environment
         if noise_level > 0 and t.noise > 0:
             v = v + rng.uniform(-1.0, 1.0, size=v.shape) * t.noise * noise_level
         parts.append(v)

@@ -103,6 +103,12 @@ def rows_of(values: Any, rows: Any) -> Any:
     return values[rows]
 
 
+def reshaped(values: Any, shape: tuple[int, ...]) -> Any:
+    """``values`` reshaped to ``shape`` (whole numbers, no -1), ``values`` itself where it has that shape already
+    (on a device a reshape is an operation dispatched from Python even when it changes nothing)."""
+    return values if tuple(values.shape) == shape else namespace(values).reshape(values, shape)
+
+
 def take_last(values: Any, index: Any) -> Any:
     """``values[..., index]`` for an integer ``index`` (k,) of ``values``' kind, as a new C-ordered array: numpy's
     ``take``, torch's ``index_select`` (one operation; the standard's ``take`` dispatches four on torch)."""
@@ -271,8 +277,10 @@ def _column_bounds(bounds: tuple[ColumnBounds, ...]) -> tuple[list[int], np.ndar
     return widths, table[:, 0], table[:, 1]
 
 
-def _numpy_uniform(rng: np.random.Generator, n: int, low: Any, high: Any, width: int | None) -> np.ndarray:
+def _numpy_uniform(rng: np.random.Generator, n: int, entry: ColumnBounds) -> np.ndarray:
     """One array of :func:`uniform_columns` from numpy's generator; per-column bounds one (n,) call per column."""
+    _bounds_width(entry)  # checked
+    low, high, width = entry
     if isinstance(low, tuple):
         return np.stack([rng.uniform(lo, hi, size=n) for lo, hi in zip(low, high, strict=True)], axis=1)
     return rng.uniform(low, high, size=n if width is None else (n, width))
@@ -284,11 +292,9 @@ def uniform_columns(rng: Any, n: int, bounds: tuple[ColumnBounds, ...]) -> list[
     would (per-column bounds: one (n,) call per column, stacked), so its stream is unchanged; a :class:`TorchRandom`
     draws them all at once, one (n, columns) array scaled per column (three operations on a device, not three per
     array)."""
-    for entry in bounds:
-        _bounds_width(entry)
     if isinstance(rng, np.random.Generator):
-        return [_numpy_uniform(rng, n, *entry) for entry in bounds]
-    return rng.uniform_columns(n, bounds)
+        return [_numpy_uniform(rng, n, entry) for entry in bounds]
+    return rng.uniform_columns(n, bounds)  # checks the bounds where it first meets them
 
 
 def random_generator(seed: int | None, reference: Any) -> Any:

@@ -279,7 +279,7 @@ def _column_bounds(bounds: tuple[ColumnBounds, ...]) -> tuple[list[int], np.ndar
 
 def _numpy_uniform(rng: np.random.Generator, n: int, entry: ColumnBounds) -> np.ndarray:
     """One array of :func:`uniform_columns` from numpy's generator; per-column bounds one (n,) call per column."""
-    _bounds_width(entry)  # checked
+    _bounds_width(entry)  # refuses per-column bounds of another width
     low, high, width = entry
     if isinstance(low, tuple):
         return np.stack([rng.uniform(lo, hi, size=n) for lo, hi in zip(low, high, strict=True)], axis=1)

@@ -12,7 +12,7 @@ observation is returned separately). Robot names (bodies, sensors, keyframe, the
 1. ``_actuate``: action a in [-1, 1]^12 (clipped; NaN raises) -> position-servo targets ctrl = ctrl_standing + s a
    (the keyframe's equilibrium targets, so a = 0 holds the standing pose); pushes (:mod:`.pushes`) on the base;
 2. ``_simulate``: ``decimation`` physics steps, the backend's buffer check (Warp's fixed contact buffers) and the
-   divergence check (non-finite or runaway state before or after, a clock that did not advance);
+   divergence check (non-finite or runaway state before or after, a simulation MuJoCo reset);
 3. ``_measure``: the world-frame state (:mod:`.state_read`), and the ground under the robot in one terrain lookup
    (:mod:`.ground`);
 4. ``_estimate_accelerations``: CoM, base angular and joint accelerations by finite differences over the 20 ms

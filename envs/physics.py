@@ -202,17 +202,22 @@ class MujocoBatchPhysics(ModelConstants):
     def step(self, nstep: int) -> np.ndarray:
         """Advance every simulation by ``nstep`` physics steps, then compute the derived quantities of the new
         state (``mj_forward``); returns the ids of the simulations that failed: MuJoCo raised an error in them (they
-        keep the state they had before the call, the others ran), or it reset them when their accelerations blew up
-        (a "bad QACC" warning, no error), which shows as a clock that did not advance by the ``nstep`` steps (not
-        where the blow-up comes in the first step from clock 0: the reset puts the clock back where it was)."""
+        keep the state they had before the call, the others ran), or it reset them in a step where their positions,
+        velocities or accelerations blew up (a "bad QPOS / QVEL / QACC" warning, no error) and stepped on from the
+        model's default state. ``mujoco.batch`` has no warning counters to read, so a reset shows by what
+        ``mj_resetData`` clears: the controls (zeroed; a step never writes them otherwise), or the clock (it did not
+        advance by the ``nstep`` steps). Each sees a case the other misses: a blow-up in the first step from clock 0
+        (the reset puts the clock back where it was), controls that were all 0 already."""
         expected = self.time + nstep * self.timestep  # a new array: the clocks the steps should reach
+        controls = self.ctrl.copy()
         raised = np.zeros(0, dtype=np.int64)
         try:
             self.batch.step(nstep=nstep, stage=mujoco.mjtStage.mjSTAGE_ACC)
         except mj_batch.SimulationError as exc:
             raised = np.asarray(exc.ids, dtype=np.int64)
-        stalled = np.flatnonzero(np.abs(self.time - expected) > 0.5 * self.timestep)
-        return np.union1d(raised, stalled)
+        stalled = np.abs(self.time - expected) > 0.5 * self.timestep
+        cleared = np.any(self.ctrl != controls, axis=1)
+        return np.union1d(raised, np.flatnonzero(stalled | cleared))
 
     def check_overflow(self) -> None:
         """Nothing to check: MuJoCo grows its contact and constraint arena as needed (a full arena raises in

@@ -5,11 +5,20 @@ from __future__ import annotations
 import ctypes.util
 import os
 
+import pytest
+
 # Without a display MuJoCo's default GLFW backend aborts the whole process on the first render call (no
 # exception to catch). `make test` exports MUJOCO_GL=egl; a bare `pytest` gets the same default here, before
 # anything imports mujoco, when Mesa's EGL is installed (rendering tests skip or report otherwise).
 if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and ctypes.util.find_library("EGL"):
     os.environ["MUJOCO_GL"] = "egl"
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _sb3_logs_in_the_session_folder(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Stable-Baselines3 gives a model learning without a logger a folder of its own under the system's temporary
+    directory (``SB3-<date>``, one per ``learn``, never removed): the tests' go to the session's folder instead."""
+    os.environ.setdefault("SB3_LOGDIR", str(tmp_path_factory.mktemp("sb3")))
 
 
 def require_mujoco_warp() -> None:

@@ -3,9 +3,10 @@
 On a GPU every torch operation that computes is a kernel launch from Python, so the count of operations per step
 bounds how fast the core can step whatever the batch size, and every host read stalls it. This runs the core of the
 GPU benchmark (:func:`benchmarks.speed.bench_gpu.make_core`) on Warp's CPU device, times the step with and without
-its physics, counts the aten operations it dispatches per step, its host reads and random numbers
-(:class:`~benchmarks.tools.host_reads.DispatchCounter`, a ``TorchDispatchMode``: top-level operations, not
-torch.profiler's nested ones), and with ``--rsl`` the host reads of rsl-rl's training loop over the adapter::
+its physics, counts the aten operations it dispatches per step (the views among them, and the bytes the others read
+and write), its host reads and random numbers (:class:`~benchmarks.tools.host_reads.DispatchCounter`, a
+``TorchDispatchMode``: top-level operations, not torch.profiler's nested ones), and with ``--rsl`` the host reads of
+rsl-rl's training loop over the adapter::
 
     python benchmarks/speed/profile_core_ops.py [--num-envs 16] [--steps 20] [--env margin_rl/AnymalC-v1] [--rsl]
         [--by-source 30]
@@ -71,8 +72,11 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"{args.env}, {args.num_envs} environments on Warp's CPU device, per step: {1e3 * total:.2f} ms, of it "
         f"physics {1e3 * physics:.2f} ms, the rest {1e3 * rest:.2f} ms; {counter.total / args.steps:,.0f} aten "
-        f"operations dispatched, {sum(counter.host_reads.values()) / args.steps:.1f} host reads "
-        f"({dict(counter.host_reads)}), {counter.random_numbers / args.steps:,.0f} random numbers"
+        f"operations dispatched ({counter.views / args.steps:,.0f} views, {counter.kernels / args.steps:,.0f} "
+        f"kernels), {sum(counter.host_reads.values()) / args.steps:.1f} host reads ({dict(counter.host_reads)}), "
+        f"{counter.random_numbers / args.steps:,.0f} random numbers; the kernels read and write "
+        f"{counter.bytes_moved / args.steps / 2**20:.2f} MiB per step, "
+        f"{counter.bytes_moved / args.steps / args.num_envs / 1024:.1f} KiB per environment"
     )
     print("\n| operation | dispatched per step |\n|---|---|")
     for name, count in counter.ops.most_common(args.top):
@@ -85,19 +89,22 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def by_source(counter: DispatchCounter, steps: int, top: int) -> str:
-    """Markdown: the operations per step each module of the package dispatches, then the ``top`` source lines that
-    dispatch the most, with their operations."""
-    modules: dict[str, float] = {}
+    """Markdown: the operations per step each module of the package dispatches and the KiB its kernels move, then the
+    ``top`` source lines that dispatch the most, with their operations."""
+    modules: dict[str, list[float]] = {}
     for line, ops in counter.sources.items():
-        module = line.rsplit(":", 1)[0]
-        modules[module] = modules.get(module, 0.0) + sum(ops.values()) / steps
-    lines = ["| module | operations per step |", "|---|---|"]
-    lines += [f"| `{m}` | {n:.0f} |" for m, n in sorted(modules.items(), key=lambda item: -item[1])]
-    lines += ["", "| source line | operations per step | of them |", "|---|---|---|"]
+        totals = modules.setdefault(line.rsplit(":", 1)[0], [0.0, 0.0])
+        totals[0] += sum(ops.values()) / steps
+        totals[1] += counter.source_bytes[line] / steps / 1024
+    lines = ["| module | operations per step | KiB moved per step |", "|---|---|---|"]
+    ranked_modules = sorted(modules.items(), key=lambda item: -item[1][0])
+    lines += [f"| `{m}` | {n:.0f} | {kib:,.1f} |" for m, (n, kib) in ranked_modules]
+    lines += ["", "| source line | operations per step | KiB moved per step | of them |", "|---|---|---|---|"]
     ranked = sorted(counter.sources.items(), key=lambda item: -sum(item[1].values()))[:top]
     for line, ops in ranked:
         detail = ", ".join(f"{name} {n / steps:g}" for name, n in ops.most_common())
-        lines.append(f"| `{line}` | {sum(ops.values()) / steps:g} | {detail} |")
+        kib = counter.source_bytes[line] / steps / 1024
+        lines.append(f"| `{line}` | {sum(ops.values()) / steps:g} | {kib:,.1f} | {detail} |")
     return "\n".join(lines)
 
 

@@ -4,6 +4,7 @@ script a GPU session runs once is known to run to its end and to write its recor
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -75,5 +76,8 @@ def test_the_core_profile_counts_the_operations_of_a_step(capsys) -> None:
     out = capsys.readouterr().out
     summary, rows = out.splitlines()[0], [line for line in out.splitlines() if line.startswith("| `")]
     assert "environments on Warp's CPU device, per step:" in summary and "0.0 host reads" in summary
-    assert len(rows) == 3 and int(summary.split("; ")[-1].split(" aten")[0].replace(",", "")) > 100
+    counts = re.search(r"([\d,]+) aten operations dispatched \(([\d,]+) views, ([\d,]+) kernels\)", summary)
+    total, views, kernels = (int(group.replace(",", "")) for group in counts.groups())
+    assert len(rows) == 3 and total > 100 and views + kernels == total and views > 0
+    assert re.search(r"the kernels read and write [\d.]+ MiB per step, [\d.]+ KiB per environment", summary)
     assert "rsl-rl's loop" not in out  # only with --rsl

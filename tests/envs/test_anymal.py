@@ -204,18 +204,26 @@ def test_diverging_simulation_terminates_with_a_flag(toy_weights: str) -> None:
 
 def test_a_simulation_mujoco_resets_after_a_blow_up_is_reported_and_ends_as_diverged() -> None:
     """MuJoCo resets a simulation whose accelerations blow up (a "bad QACC" warning, no error) and steps on: the
-    host backend reports it by its clock, which did not advance by the step, and the core ends its episode as
-    diverged, the others stepping on. The force is put on a thigh (the core rewrites the base's row every step)."""
+    host backend reports it (by its cleared controls, or its clock that did not advance by the step) and the core
+    ends its episode as diverged, the others stepping on; also in an episode's first step, from clock 0, where the
+    reset leaves the clock as it was. The force is put on a thigh (the core rewrites the base's row every step)."""
     core = AnymalCore(EnvConfig(robot="anymal_c", margin="none"), 4, seed=0)
-    core.reset(seed=0)
-    core.step(np.zeros((4, 12)))  # a clock past the reset's 0, where MuJoCo's reset puts it back
     thigh = core.physics.body_id("LF_THIGH")
-    core.physics.xfrc_applied[2, thigh, 2] = 1e13  # [N]: an acceleration beyond MuJoCo's limit
-    out = core.step(np.zeros((4, 12)))
-    assert out.info["diverged"].tolist() == [0.0, 0.0, 1.0, 0.0] and out.terminated.tolist() == [0, 0, 1, 0]
-    core.step(np.zeros((4, 12)))  # environment 2 was reset: its clock past 0 again
-    core.physics.xfrc_applied[2, thigh, 2] = 1e13
-    assert core.physics.step(4).tolist() == [2]  # the backend's own report: the ids, by the stalled clock
+    for first_step in (True, False):
+        core.reset(seed=0)
+        if not first_step:
+            core.step(np.zeros((4, 12)))  # a clock past the reset's 0
+        core.physics.xfrc_applied[2, thigh, 2] = 1e13  # [N]: an acceleration beyond MuJoCo's limit
+        out = core.step(np.zeros((4, 12)))
+        assert out.info["diverged"].tolist() == [0.0, 0.0, 1.0, 0.0] and out.terminated.tolist() == [0, 0, 1, 0]
+    physics = core.physics
+    for clue in ("controls", "clock"):  # the backend's own report, the ids, by either clue alone
+        core.reset(seed=0)
+        if clue == "clock":
+            core.step(np.zeros((4, 12)))  # a clock past 0
+            physics.ctrl[2] = 0.0  # controls a reset does not change
+        physics.xfrc_applied[2, thigh, 2] = 1e13
+        assert physics.step(4).tolist() == [2]
 
 
 def test_vector_env_same_step_autoreset(toy_weights: str) -> None:

@@ -11,6 +11,7 @@ from typing import Any
 
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
+from torch.utils._pytree import tree_leaves
 
 HOST_READS = frozenset({"_local_scalar_dense", "nonzero", "is_nonzero", "item", "equal"})
 """Operations that return a value to the host (``bool(t)``, ``int(t)``, ``t.item()``, ``t.nonzero()``...)."""
@@ -88,8 +89,7 @@ class DispatchCounter(TorchDispatchMode):
 
 def _tensor_bytes(tree: Any) -> int:
     """Bytes of the tensors in a nest of tuples, lists and dicts (each as viewed: elements times their size)."""
-    leaves = torch.utils._pytree.tree_leaves(tree)
-    return sum(t.numel() * t.element_size() for t in leaves if isinstance(t, torch.Tensor))
+    return sum(t.numel() * t.element_size() for t in tree_leaves(tree) if isinstance(t, torch.Tensor))
 
 
 def _source_line() -> str:
